@@ -1,0 +1,1 @@
+//! Procedural Vienna-like city generator (work in progress).

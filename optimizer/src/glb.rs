@@ -1,0 +1,1 @@
+//! Minimal GLB writer (work in progress).

@@ -1,0 +1,1 @@
+//! Safe glTF loading (work in progress).

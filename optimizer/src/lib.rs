@@ -1,0 +1,23 @@
+//! Automatic impostor placement for guaranteed frame rates and low memory
+//! requirements (Jeschke, Wimmer, Schumann, Purgathofer 2005).
+//!
+//! The pipeline, one module per stage, plain data between stages:
+//!
+//! ```text
+//! scene ──► hierarchy ──► problem_views ──► candidates ──► greedy ──► placement
+//! (glTF/JSON)  (BVH)       (cells × VDIs)   (shafts, boxes)  (lazy)      │
+//!                                                                      └─► evaluate
+//! ```
+
+#![deny(missing_docs)]
+
+pub mod citygen;
+pub mod error;
+pub mod glb;
+pub mod gltf_load;
+pub mod scene;
+
+pub use error::{Error, Result};
+
+/// Version of this library.
+pub const VERSION: &str = env!("CARGO_PKG_VERSION");

@@ -1,0 +1,159 @@
+//! The scene: objects with world bounds and rendering costs.
+//!
+//! Placement needs bounds and costs only, so a [`Scene`] holds no geometry.
+//! It is built from a glTF file ([`crate::gltf_load`]) or from a JSON scene
+//! summary ([`SceneSummary`]).
+
+use glam::DVec3;
+use schemars::JsonSchema;
+use serde::{Deserialize, Serialize};
+
+use crate::error::{Error, Result};
+
+/// One object of the scene: a glTF node instance that draws a mesh, or one
+/// entry of a JSON scene summary.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Object {
+    /// Name (glTF node name or summary name); may be empty.
+    pub name: String,
+    /// World-space bounding box minimum, metres.
+    pub min: DVec3,
+    /// World-space bounding box maximum, metres.
+    pub max: DVec3,
+    /// Triangle count (triangle-list index count / 3; strips and fans converted).
+    pub triangles: u64,
+    /// Draw calls (glTF primitives of the mesh).
+    pub draw_calls: u32,
+}
+
+impl Object {
+    /// Centre of the bounding box (also the centre of the bounding sphere).
+    pub fn center(&self) -> DVec3 {
+        (self.min + self.max) * 0.5
+    }
+
+    /// Radius of the bounding sphere (the box's half-diagonal).
+    pub fn radius(&self) -> f64 {
+        (self.max - self.min).length() * 0.5
+    }
+}
+
+/// A scene: its objects, indexed by object id (see DESIGN §5).
+#[derive(Clone, Debug, Default)]
+pub struct Scene {
+    /// Objects; the index is the object id.
+    pub objects: Vec<Object>,
+}
+
+impl Scene {
+    /// Checks the invariants every stage relies on: at least one object,
+    /// finite bounds with `min <= max`. `source` names the input in errors.
+    pub fn validate(&self, source: &str) -> Result<()> {
+        if self.objects.is_empty() {
+            return Err(Error::bad(source, "the scene has no objects (no node draws a mesh)"));
+        }
+        for (id, o) in self.objects.iter().enumerate() {
+            if !(o.min.is_finite() && o.max.is_finite()) {
+                return Err(Error::bad(
+                    format!("{source}: object {id} ({})", o.name),
+                    "bounds are not finite (NaN or infinite coordinates)",
+                ));
+            }
+            if o.min.cmpgt(o.max).any() {
+                return Err(Error::bad(
+                    format!("{source}: object {id} ({})", o.name),
+                    format!("bounds min {:?} exceed max {:?}", o.min, o.max),
+                ));
+            }
+            if o.max.abs().max_element() > 1e9 || o.min.abs().max_element() > 1e9 {
+                return Err(Error::bad(
+                    format!("{source}: object {id} ({})", o.name),
+                    "coordinates beyond 1e9 m",
+                ));
+            }
+        }
+        Ok(())
+    }
+
+    /// Bounds of all objects.
+    pub fn bounds(&self) -> (DVec3, DVec3) {
+        let mut lo = DVec3::splat(f64::INFINITY);
+        let mut hi = DVec3::splat(f64::NEG_INFINITY);
+        for o in &self.objects {
+            lo = lo.min(o.min);
+            hi = hi.max(o.max);
+        }
+        (lo, hi)
+    }
+
+    /// Total triangles over all objects.
+    pub fn total_triangles(&self) -> u64 {
+        self.objects.iter().map(|o| o.triangles).sum()
+    }
+
+    /// The JSON scene summary of this scene.
+    pub fn summary(&self) -> SceneSummary {
+        SceneSummary {
+            objects: self
+                .objects
+                .iter()
+                .map(|o| SummaryObject {
+                    name: (!o.name.is_empty()).then(|| o.name.clone()),
+                    min: o.min.to_array(),
+                    max: o.max.to_array(),
+                    triangles: o.triangles,
+                    draw_calls: o.draw_calls,
+                })
+                .collect(),
+        }
+    }
+}
+
+/// JSON scene summary (`schemas/scene.schema.json`): objects with bounds and
+/// costs, no geometry. Object ids are array indices.
+#[derive(Clone, Debug, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct SceneSummary {
+    /// The objects; the array index is the object id.
+    pub objects: Vec<SummaryObject>,
+}
+
+/// One object of a JSON scene summary.
+#[derive(Clone, Debug, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct SummaryObject {
+    /// Optional name.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub name: Option<String>,
+    /// World bounding box minimum `[x, y, z]`, metres.
+    pub min: [f64; 3],
+    /// World bounding box maximum `[x, y, z]`, metres.
+    pub max: [f64; 3],
+    /// Triangle count.
+    pub triangles: u64,
+    /// Draw calls.
+    pub draw_calls: u32,
+}
+
+impl SceneSummary {
+    /// Parses a JSON scene summary; `source` names the input in errors.
+    pub fn from_json(bytes: &[u8], source: &str) -> Result<Scene> {
+        let summary: SceneSummary = serde_json::from_slice(bytes)
+            .map_err(|e| Error::bad(source, format!("invalid scene summary JSON: {e}")))?;
+        let scene = Scene {
+            objects: summary
+                .objects
+                .into_iter()
+                .map(|o| Object {
+                    name: o.name.unwrap_or_default(),
+                    min: DVec3::from_array(o.min),
+                    max: DVec3::from_array(o.max),
+                    triangles: o.triangles,
+                    draw_calls: o.draw_calls,
+                })
+                .collect(),
+        };
+        scene.validate(source)?;
+        Ok(scene)
+    }
+}
