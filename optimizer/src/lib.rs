@@ -11,11 +11,25 @@
 
 #![deny(missing_docs)]
 
+pub mod candidates;
 pub mod citygen;
+pub mod cost;
 pub mod error;
+pub mod evaluate;
 pub mod glb;
+pub mod geom;
 pub mod gltf_load;
+pub mod greedy;
+pub mod hierarchy;
+pub mod impostor_model;
+pub mod job;
+pub mod pipeline;
+pub mod placement;
+pub mod problem_views;
+pub mod rng;
 pub mod scene;
+pub mod schema;
+pub mod testutil;
 
 pub use error::{Error, Result};
 

@@ -1,1 +1,235 @@
-fn main() {}
+//! The `impostor` command-line tool: a thin shell over the `optimizer` library.
+
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+
+use clap::{Parser, Subcommand};
+use optimizer::evaluate::{EvalOptions, evaluate};
+use optimizer::job::Job;
+use optimizer::pipeline::{PlaceOptions, place};
+use optimizer::placement::Placement;
+use optimizer::{Error, Result, citygen, gltf_load, schema};
+
+/// Automatic impostor placement for guaranteed frame rates and low memory.
+#[derive(Parser)]
+#[command(name = "impostor", version, about)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Place impostors: exit 0 when every problem view is solved, 3 when some
+    /// stay unsolved (the placement is still written), 2 for bad input.
+    Place {
+        /// Scene: .glb, .gltf or a JSON scene summary.
+        scene: PathBuf,
+        /// Job JSON (schemas/job.schema.json).
+        #[arg(long)]
+        job: PathBuf,
+        /// Output placement JSON (default: standard output).
+        #[arg(short, long)]
+        out: Option<PathBuf>,
+        /// Worker threads (default: all cores).
+        #[arg(long)]
+        threads: Option<usize>,
+        /// Write timings and counters to this JSON file.
+        #[arg(long)]
+        stats: Option<PathBuf>,
+        /// Remove impostors not needed to keep every problem view within the target.
+        #[arg(long)]
+        prune: bool,
+    },
+    /// Check a placement independently with random views and exact frusta.
+    Evaluate {
+        /// Scene: .glb, .gltf or a JSON scene summary.
+        scene: PathBuf,
+        /// Job JSON.
+        #[arg(long)]
+        job: PathBuf,
+        /// Placement JSON written by `place`.
+        #[arg(long)]
+        placement: PathBuf,
+        /// Output evaluation JSON (default: standard output).
+        #[arg(short, long)]
+        out: Option<PathBuf>,
+        /// Number of random views.
+        #[arg(long, default_value_t = 10_000)]
+        views: u64,
+        /// Seed of the view sampler.
+        #[arg(long, default_value_t = 1)]
+        seed: u64,
+        /// Worker threads (default: all cores).
+        #[arg(long)]
+        threads: Option<usize>,
+    },
+    /// Generate a seeded, Vienna-like procedural city.
+    GenCity {
+        /// Seed.
+        #[arg(long, default_value_t = 1)]
+        seed: u64,
+        /// Fraction of the full city's area (1 ≈ 1500 × 1000 m, ≥ 5,000 objects).
+        #[arg(long, default_value_t = 1.0)]
+        scale: f64,
+        /// Write the JSON scene summary instead of the GLB.
+        #[arg(long)]
+        summary: bool,
+        /// Output file (default: standard output for --summary; required for GLB).
+        #[arg(short, long)]
+        out: Option<PathBuf>,
+    },
+    /// Write the JSON Schemas of the job, scene summary, placement and
+    /// evaluation files.
+    Schema {
+        /// Output directory.
+        #[arg(long, default_value = "schemas")]
+        out_dir: PathBuf,
+    },
+}
+
+/// Writes `bytes` to `path` atomically (temporary file + rename), or to
+/// standard output.
+fn write_output(path: Option<&Path>, bytes: &[u8]) -> Result<()> {
+    use std::io::Write;
+    match path {
+        None => std::io::stdout()
+            .write_all(bytes)
+            .map_err(|e| Error::io("<stdout>", e)),
+        Some(p) => {
+            let dir = p.parent().filter(|d| !d.as_os_str().is_empty()).unwrap_or(Path::new("."));
+            let name = p.file_name().ok_or_else(|| Error::bad(p.display().to_string(), "not a file path"))?;
+            let tmp = dir.join(format!(".{}.tmp{}", name.to_string_lossy(), std::process::id()));
+            std::fs::write(&tmp, bytes).map_err(|e| Error::io(p, e))?;
+            std::fs::rename(&tmp, p).map_err(|e| {
+                let _ = std::fs::remove_file(&tmp);
+                Error::io(p, e)
+            })
+        }
+    }
+}
+
+fn read_job(path: &Path) -> Result<Job> {
+    let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+    Job::from_json(&bytes, &path.display().to_string())
+}
+
+fn set_threads(threads: Option<usize>) -> Result<()> {
+    if let Some(n) = threads {
+        if n == 0 || n > 1024 {
+            return Err(Error::bad("--threads", format!("{n} must be between 1 and 1024")));
+        }
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(n)
+            .build_global()
+            .map_err(|e| Error::Internal(format!("thread pool: {e}")))?;
+    }
+    Ok(())
+}
+
+fn json(value: &impl serde::Serialize) -> Result<Vec<u8>> {
+    let mut v = serde_json::to_vec_pretty(value).map_err(|e| Error::Internal(e.to_string()))?;
+    v.push(b'\n');
+    Ok(v)
+}
+
+fn run(cli: Cli) -> Result<ExitCode> {
+    match cli.command {
+        Command::Place {
+            scene,
+            job,
+            out,
+            threads,
+            stats,
+            prune,
+        } => {
+            set_threads(threads)?;
+            let job = read_job(&job)?;
+            let scene = gltf_load::load_scene_file(&scene)?;
+            let output = place(&scene, &job, &PlaceOptions { prune, progress: true });
+            write_output(out.as_deref(), &json(&output.placement)?)?;
+            if let Some(s) = stats {
+                write_output(Some(&s), &json(&output.stats)?)?;
+            }
+            let sum = &output.placement.summary;
+            eprintln!(
+                "{} CPVs, {} candidates, {} impostors, {:.3} MB, {} unsolved",
+                sum.cpvs,
+                sum.candidates,
+                sum.impostors,
+                sum.memory_bytes as f64 / 1e6,
+                sum.unsolved_cpvs
+            );
+            Ok(if sum.unsolved_cpvs > 0 { ExitCode::from(3) } else { ExitCode::SUCCESS })
+        }
+        Command::Evaluate {
+            scene,
+            job,
+            placement,
+            out,
+            views,
+            seed,
+            threads,
+        } => {
+            set_threads(threads)?;
+            let job = read_job(&job)?;
+            let scene = gltf_load::load_scene_file(&scene)?;
+            let bytes = std::fs::read(&placement).map_err(|e| Error::io(&placement, e))?;
+            let name = placement.display().to_string();
+            let p: Placement = serde_json::from_slice(&bytes)
+                .map_err(|e| Error::bad(&name, format!("invalid placement JSON: {e}")))?;
+            let eval = evaluate(&scene, &job, &p, &EvalOptions { views, seed }, &name)?;
+            write_output(out.as_deref(), &json(&eval)?)?;
+            eprintln!(
+                "{} views: max {:.3} ms, p99 {:.3} ms, {} violations ({} in solved)",
+                eval.views, eval.max_ms, eval.p99_ms, eval.violations, eval.violations_in_solved
+            );
+            Ok(if eval.violations_in_solved > 0 || eval.impostors_outside_view_cell > 0 {
+                ExitCode::from(4)
+            } else {
+                ExitCode::SUCCESS
+            })
+        }
+        Command::GenCity {
+            seed,
+            scale,
+            summary,
+            out,
+        } => {
+            let glb = citygen::generate(&citygen::CityParams { seed, scale })?;
+            if summary {
+                let scene = gltf_load::load_scene_bytes(&glb, "generated city")?;
+                write_output(out.as_deref(), &json(&scene.summary())?)?;
+            } else {
+                let out = out.ok_or_else(|| Error::bad("gen-city", "-o FILE is required for the GLB (or use --summary)"))?;
+                write_output(Some(&out), &glb)?;
+            }
+            Ok(ExitCode::SUCCESS)
+        }
+        Command::Schema { out_dir } => {
+            std::fs::create_dir_all(&out_dir).map_err(|e| Error::io(&out_dir, e))?;
+            for (name, text) in schema::all() {
+                write_output(Some(&out_dir.join(name)), text.as_bytes())?;
+            }
+            Ok(ExitCode::SUCCESS)
+        }
+    }
+}
+
+fn main() -> ExitCode {
+    let cli = Cli::parse();
+    match std::panic::catch_unwind(|| run(cli)) {
+        Ok(Ok(code)) => code,
+        Ok(Err(e)) => {
+            eprintln!("error: {e}");
+            match e {
+                Error::BadInput { .. } | Error::Io { .. } => ExitCode::from(2),
+                _ => ExitCode::from(1),
+            }
+        }
+        Err(_) => {
+            eprintln!("error: internal error (a bug): the program panicked");
+            ExitCode::from(1)
+        }
+    }
+}

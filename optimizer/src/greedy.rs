@@ -1,0 +1,287 @@
+//! Greedy selection with lazy recalculation (paper §5, DESIGN §2.7).
+//!
+//! `Δt_{i,CPV} = max(0, t_CPV − max(t^i_CPV, t_max))` where `t^i_CPV` is the
+//! CPV's time with the cluster's current representation (its geometry, or
+//! descendant impostors already placed there) replaced by impostor `i`;
+//! `s_i = Σ_CPV Δt_{i,CPV} / m_i`. A max-heap holds stale scores; the top is
+//! recomputed and accepted if it still beats the next key, else re-pushed.
+//! This is exact because no score increases when an impostor is added (in the
+//! `sum` and `primitives` modes; in the `max` mode it is a heuristic). Ties
+//! are broken by the lower candidate id, so the result is deterministic.
+//!
+//! Accepting `i` adds it to every CPV it accelerates, replacing descendant
+//! impostors there; an impostor left in no CPV is deleted and its memory
+//! regained.
+
+use std::cmp::Ordering;
+use std::collections::BinaryHeap;
+
+use rayon::prelude::*;
+
+use crate::candidates::{Candidate, Candidates, for_each_contained};
+use crate::cost::Cost;
+use crate::problem_views::{Context, Cpv, ProblemViews};
+
+/// The selection: which candidates are impostors and where they are used.
+#[derive(Clone, Debug)]
+pub struct Selection {
+    /// Per CPV: the candidate ids of its impostors (an antichain of clusters).
+    pub cpv_impostors: Vec<Vec<u32>>,
+    /// Per CPV: the cost after replacement.
+    pub cpv_cost: Vec<Cost>,
+    /// Per candidate: the number of CPVs using it (0 = not an impostor).
+    pub uses: Vec<u32>,
+    /// Greedy choices made (including impostors later replaced).
+    pub accepted: u64,
+    /// Score evaluations.
+    pub evaluations: u64,
+    /// Impostors removed by the pruning pass.
+    pub pruned: u64,
+}
+
+impl Selection {
+    /// Candidate ids of the final impostors, ascending.
+    pub fn impostors(&self) -> Vec<u32> {
+        (0..self.uses.len() as u32).filter(|&i| self.uses[i as usize] > 0).collect()
+    }
+}
+
+/// Heap key: higher score first, then lower candidate id.
+#[derive(Clone, Copy, Debug)]
+struct Key {
+    score: f64,
+    id: u32,
+}
+
+impl PartialEq for Key {
+    fn eq(&self, o: &Self) -> bool {
+        self.cmp(o) == Ordering::Equal
+    }
+}
+impl Eq for Key {}
+impl PartialOrd for Key {
+    fn partial_cmp(&self, o: &Self) -> Option<Ordering> {
+        Some(self.cmp(o))
+    }
+}
+impl Ord for Key {
+    fn cmp(&self, o: &Self) -> Ordering {
+        self.score.total_cmp(&o.score).then(o.id.cmp(&self.id))
+    }
+}
+
+/// The optimisation state shared by the lazy and naive variants.
+struct State<'a> {
+    ctx: &'a Context<'a>,
+    pv: &'a ProblemViews,
+    cands: &'a [Candidate],
+    sel: Selection,
+}
+
+/// The effect of impostor `i` on one CPV.
+struct Effect {
+    delta: f64,
+    accelerates: bool,
+    new_cost: Cost,
+}
+
+impl<'a> State<'a> {
+    fn new(ctx: &'a Context<'a>, pv: &'a ProblemViews, cands: &'a Candidates) -> Self {
+        State {
+            ctx,
+            pv,
+            cands: &cands.list,
+            sel: Selection {
+                cpv_impostors: vec![Vec::new(); pv.cpvs.len()],
+                cpv_cost: pv.cpvs.iter().map(|c| c.cost).collect(),
+                uses: vec![0; cands.list.len()],
+                accepted: 0,
+                evaluations: 0,
+                pruned: 0,
+            },
+        }
+    }
+
+    /// Cost of impostor `j` in CPV `cpv`.
+    fn impostor_cost(&self, j: u32, cpv: &Cpv) -> Cost {
+        let cand = &self.cands[j as usize];
+        let s = self.ctx.hierarchy.nodes[cand.node as usize].sphere;
+        self.ctx
+            .model
+            .impostor(cand.spec.layers, s.radius, cpv.region.distance_to_point(s.center))
+    }
+
+    fn effect(&self, i: u32, c: u32) -> Option<Effect> {
+        let cand = &self.cands[i as usize];
+        let cpv = &self.pv.cpvs[c as usize];
+        let orig = cpv.node_cost(cand.node)?;
+        let h = self.ctx.hierarchy;
+        // Current cost of the cluster's representation in this CPV.
+        let mut rep = orig;
+        for &j in &self.sel.cpv_impostors[c as usize] {
+            let nj = self.cands[j as usize].node;
+            if nj == cand.node || h.is_descendant(cand.node, nj) {
+                return None; // already represented by j
+            }
+            if h.is_descendant(nj, cand.node) {
+                let oj = cpv.node_cost(nj)?;
+                rep = rep - (oj - self.impostor_cost(j, cpv));
+            }
+        }
+        let cur = self.sel.cpv_cost[c as usize];
+        let new_cost = cur - rep + self.impostor_cost(i, cpv);
+        let m = &self.ctx.model;
+        let (t_cur, t_new) = (m.frame_time(cur), m.frame_time(new_cost));
+        Some(Effect {
+            delta: (t_cur - t_new.max(self.ctx.t_max)).max(0.0),
+            accelerates: t_new < t_cur,
+            new_cost,
+        })
+    }
+
+    fn score(&self, i: u32) -> f64 {
+        let mut sum = 0.0;
+        for_each_contained(self.pv, &self.cands[i as usize], |c| {
+            if let Some(e) = self.effect(i, c) {
+                sum += e.delta;
+            }
+        });
+        sum / self.cands[i as usize].spec.memory_bytes.max(1) as f64
+    }
+
+    fn accept(&mut self, i: u32) {
+        let mut changes: Vec<(u32, Cost)> = Vec::new();
+        for_each_contained(self.pv, &self.cands[i as usize], |c| {
+            if let Some(e) = self.effect(i, c) {
+                if e.accelerates {
+                    changes.push((c, e.new_cost));
+                }
+            }
+        });
+        let h = self.ctx.hierarchy;
+        let node = self.cands[i as usize].node;
+        for (c, cost) in changes {
+            let list = &mut self.sel.cpv_impostors[c as usize];
+            let cands = self.cands;
+            let uses = &mut self.sel.uses;
+            list.retain(|&j| {
+                let replaced = h.is_descendant(cands[j as usize].node, node);
+                if replaced {
+                    uses[j as usize] -= 1;
+                }
+                !replaced
+            });
+            list.push(i);
+            self.sel.uses[i as usize] += 1;
+            self.sel.cpv_cost[c as usize] = cost;
+        }
+        self.sel.accepted += 1;
+    }
+}
+
+/// Lazy greedy selection.
+pub fn select_lazy(ctx: &Context, pv: &ProblemViews, cands: &Candidates) -> Selection {
+    let mut st = State::new(ctx, pv, cands);
+    let initial: Vec<f64> = (0..cands.list.len() as u32)
+        .into_par_iter()
+        .map(|i| st.score(i))
+        .collect();
+    st.sel.evaluations = initial.len() as u64;
+    let mut heap: BinaryHeap<Key> = initial
+        .into_iter()
+        .enumerate()
+        .filter(|&(_, s)| s > 0.0)
+        .map(|(i, score)| Key { score, id: i as u32 })
+        .collect();
+    while let Some(top) = heap.pop() {
+        let score = st.score(top.id);
+        st.sel.evaluations += 1;
+        if score <= 0.0 {
+            continue;
+        }
+        let fresh = Key { score, id: top.id };
+        match heap.peek() {
+            Some(next) if fresh < *next => heap.push(fresh),
+            _ => st.accept(top.id),
+        }
+    }
+    st.sel
+}
+
+/// Naive greedy selection: recomputes every score after each choice. Only
+/// for testing the lazy variant on small inputs.
+pub fn select_naive(ctx: &Context, pv: &ProblemViews, cands: &Candidates) -> Selection {
+    let mut st = State::new(ctx, pv, cands);
+    let mut alive: Vec<u32> = (0..cands.list.len() as u32).collect();
+    loop {
+        let mut best: Option<Key> = None;
+        let mut next_alive = Vec::with_capacity(alive.len());
+        for &i in &alive {
+            let score = st.score(i);
+            st.sel.evaluations += 1;
+            if score <= 0.0 {
+                continue;
+            }
+            next_alive.push(i);
+            let k = Key { score, id: i };
+            if best.is_none_or(|b| k > b) {
+                best = Some(k);
+            }
+        }
+        alive = next_alive;
+        match best {
+            Some(b) => st.accept(b.id),
+            None => break,
+        }
+    }
+    st.sel
+}
+
+/// Removes impostors that are not needed to keep every CPV within `t_max`,
+/// largest memory first (ties: lower id). Removing an impostor from a CPV
+/// draws its cluster's objects as geometry there again; a removal is kept
+/// only if every CPV using the impostor stays within `t_max`.
+pub fn prune(ctx: &Context, pv: &ProblemViews, cands: &Candidates, sel: &mut Selection) {
+    let st = State {
+        ctx,
+        pv,
+        cands: &cands.list,
+        sel: sel.clone(),
+    };
+    let mut order = st.sel.impostors();
+    order.sort_by_key(|&i| (std::cmp::Reverse(cands.list[i as usize].spec.memory_bytes), i));
+    let mut users: Vec<Vec<u32>> = vec![Vec::new(); cands.list.len()];
+    for (c, list) in sel.cpv_impostors.iter().enumerate() {
+        for &i in list {
+            users[i as usize].push(c as u32);
+        }
+    }
+    let mut st = st;
+    for i in order {
+        let mut new_costs = Vec::with_capacity(users[i as usize].len());
+        let mut ok = true;
+        for &c in &users[i as usize] {
+            let cpv = &pv.cpvs[c as usize];
+            let Some(orig) = cpv.node_cost(cands.list[i as usize].node) else {
+                ok = false;
+                break;
+            };
+            let cost = st.sel.cpv_cost[c as usize] - st.impostor_cost(i, cpv) + orig;
+            if ctx.model.frame_time(cost) > ctx.t_max {
+                ok = false;
+                break;
+            }
+            new_costs.push((c, cost));
+        }
+        if !ok {
+            continue;
+        }
+        for (c, cost) in new_costs {
+            st.sel.cpv_cost[c as usize] = cost;
+            st.sel.cpv_impostors[c as usize].retain(|&j| j != i);
+        }
+        st.sel.uses[i as usize] = 0;
+        st.sel.pruned += 1;
+    }
+    *sel = st.sel;
+}

@@ -1,0 +1,481 @@
+//! The job: view space, camera, frame-time target, cost model and the knobs of
+//! every stage (`schemas/job.schema.json`). Every field but `view_space` has
+//! the paper's reference value as its default.
+
+use glam::DVec3;
+use schemars::JsonSchema;
+use serde::{Deserialize, Serialize};
+
+use crate::error::{Error, Result};
+
+/// A placement job.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct Job {
+    /// The region the camera can move in and the view directions it may take.
+    pub view_space: ViewSpace,
+    /// Field of view and output resolution, fixed for all views.
+    #[serde(default)]
+    pub camera: Camera,
+    /// Maximum frame time `t_max` every view must meet, milliseconds. Default 16.
+    #[serde(default = "default_t_max")]
+    pub target_frame_time_ms: f64,
+    /// Image quality criterion: maximum screen-space error of an impostor,
+    /// pixels. Default 1.
+    #[serde(default = "default_max_error")]
+    pub max_error_px: f64,
+    /// Rendering-time estimation.
+    #[serde(default)]
+    pub cost_model: CostModelParams,
+    /// Problem view space approximation.
+    #[serde(default)]
+    pub problem_views: ProblemViewParams,
+    /// Impostor candidate generation.
+    #[serde(default)]
+    pub candidates: CandidateParams,
+    /// Impostor memory model.
+    #[serde(default)]
+    pub memory: MemoryParams,
+}
+
+/// View space: a box of viewpoints and a pitch range of view directions.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct ViewSpace {
+    /// Box minimum `[x, y, z]`, metres.
+    pub min: [f64; 3],
+    /// Box maximum `[x, y, z]`, metres.
+    pub max: [f64; 3],
+    /// Allowed elevation of view directions `[lo, hi]`, degrees in −90…90.
+    /// Default `[-90, 90]` (the full sphere).
+    #[serde(default = "default_pitch")]
+    pub pitch_deg: [f64; 2],
+}
+
+/// Camera: vertical field of view and output resolution.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct Camera {
+    /// Vertical field of view, degrees. Default 45.
+    #[serde(default = "default_fov")]
+    pub fov_deg: f64,
+    /// Output resolution `[width, height]`, pixels. Default `[512, 512]`.
+    #[serde(default = "default_resolution")]
+    pub resolution: [u32; 2],
+}
+
+/// How per-object costs combine into a frame time.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, JsonSchema)]
+#[serde(rename_all = "lowercase")]
+pub enum Combine {
+    /// `frame + Σ (calls + triangles + pixels)`: conservative, the default.
+    Sum,
+    /// `frame + max(CPU, GPU)` with CPU = draw calls, GPU = triangles + pixels.
+    Max,
+    /// `frame + triangles · triangle_ns`: a primitive budget.
+    Primitives,
+}
+
+/// Rendering-time estimation constants (Wimmer & Wonka 2003 style). The
+/// defaults describe a draw-call-bound renderer, as in the paper's Vienna test.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct CostModelParams {
+    /// Fixed cost per frame (clear, swap, setup), milliseconds. Default 2.
+    #[serde(default = "default_frame_ms")]
+    pub frame_ms: f64,
+    /// Cost per draw call, microseconds. Default 8.
+    #[serde(default = "default_draw_call_us")]
+    pub draw_call_us: f64,
+    /// Cost per triangle, nanoseconds. Default 0.5.
+    #[serde(default = "default_triangle_ns")]
+    pub triangle_ns: f64,
+    /// Cost per rasterised pixel, nanoseconds. Default 0.02.
+    #[serde(default = "default_pixel_ns")]
+    pub pixel_ns: f64,
+    /// How costs combine. Default `sum`.
+    #[serde(default = "default_combine")]
+    pub combine: Combine,
+}
+
+/// Problem view space approximation (paper §3).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct ProblemViewParams {
+    /// Largest side of a CPV's 3D region, metres. Default 23.
+    #[serde(default = "default_cell_size")]
+    pub cell_size: f64,
+    /// Minimum angular size of a view-direction interval, degrees. Default 11.25.
+    #[serde(default = "default_min_vdi")]
+    pub min_vdi_deg: f64,
+}
+
+/// Which view-cell shapes make candidates.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, JsonSchema)]
+#[serde(rename_all = "lowercase")]
+pub enum ViewCellKind {
+    /// Shafts around the cluster (the paper's reference).
+    Shafts,
+    /// Boxes of the 3D view space hierarchy.
+    Boxes,
+    /// Both.
+    Both,
+}
+
+/// Impostor candidate generation (paper §4).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct CandidateParams {
+    /// View-cell shapes. Default `shafts`.
+    #[serde(default = "default_view_cells")]
+    pub view_cells: ViewCellKind,
+    /// Shaft apex angles (full cone angles), degrees. Default `[11.25, 22.5, 45, 90]`.
+    #[serde(default = "default_apex")]
+    pub apex_angles_deg: Vec<f64>,
+    /// Angular step of shaft axis directions (azimuth, and elevation when the
+    /// view space has height), degrees. Default 11.25.
+    #[serde(default = "default_dir_step")]
+    pub direction_step_deg: f64,
+    /// Shaft minimum distances are `size · 2^k` for `k = 0..=doublings`, with
+    /// size the cluster's diameter. Default 10.
+    #[serde(default = "default_doublings")]
+    pub min_distance_doublings: u32,
+}
+
+/// Impostor memory model.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct MemoryParams {
+    /// Bytes per texel. Default 4 (RGBA8).
+    #[serde(default = "default_bpt")]
+    pub bytes_per_texel: f64,
+    /// Count a mip chain (× 4/3). Default true.
+    #[serde(default = "default_true")]
+    pub mipmaps: bool,
+    /// Largest texture side per layer, texels; a candidate that needs more
+    /// cannot meet the quality criterion and is dropped. Default 2048.
+    #[serde(default = "default_max_tex")]
+    pub max_texture_size: u32,
+}
+
+fn default_t_max() -> f64 {
+    16.0
+}
+fn default_max_error() -> f64 {
+    1.0
+}
+fn default_pitch() -> [f64; 2] {
+    [-90.0, 90.0]
+}
+fn default_fov() -> f64 {
+    45.0
+}
+fn default_resolution() -> [u32; 2] {
+    [512, 512]
+}
+fn default_frame_ms() -> f64 {
+    2.0
+}
+fn default_draw_call_us() -> f64 {
+    8.0
+}
+fn default_triangle_ns() -> f64 {
+    0.5
+}
+fn default_pixel_ns() -> f64 {
+    0.02
+}
+fn default_combine() -> Combine {
+    Combine::Sum
+}
+fn default_cell_size() -> f64 {
+    23.0
+}
+fn default_min_vdi() -> f64 {
+    11.25
+}
+fn default_view_cells() -> ViewCellKind {
+    ViewCellKind::Shafts
+}
+fn default_apex() -> Vec<f64> {
+    vec![11.25, 22.5, 45.0, 90.0]
+}
+fn default_dir_step() -> f64 {
+    11.25
+}
+fn default_doublings() -> u32 {
+    10
+}
+fn default_bpt() -> f64 {
+    4.0
+}
+fn default_true() -> bool {
+    true
+}
+fn default_max_tex() -> u32 {
+    2048
+}
+
+impl Default for Camera {
+    fn default() -> Self {
+        Camera {
+            fov_deg: default_fov(),
+            resolution: default_resolution(),
+        }
+    }
+}
+
+impl Default for CostModelParams {
+    fn default() -> Self {
+        CostModelParams {
+            frame_ms: default_frame_ms(),
+            draw_call_us: default_draw_call_us(),
+            triangle_ns: default_triangle_ns(),
+            pixel_ns: default_pixel_ns(),
+            combine: default_combine(),
+        }
+    }
+}
+
+impl Default for ProblemViewParams {
+    fn default() -> Self {
+        ProblemViewParams {
+            cell_size: default_cell_size(),
+            min_vdi_deg: default_min_vdi(),
+        }
+    }
+}
+
+impl Default for CandidateParams {
+    fn default() -> Self {
+        CandidateParams {
+            view_cells: default_view_cells(),
+            apex_angles_deg: default_apex(),
+            direction_step_deg: default_dir_step(),
+            min_distance_doublings: default_doublings(),
+        }
+    }
+}
+
+impl Default for MemoryParams {
+    fn default() -> Self {
+        MemoryParams {
+            bytes_per_texel: default_bpt(),
+            mipmaps: default_true(),
+            max_texture_size: default_max_tex(),
+        }
+    }
+}
+
+/// Upper bound on the number of 3D cells of the problem view space grid; more
+/// would not finish in reasonable time or memory.
+pub const MAX_CELLS: f64 = 1.0e6;
+
+impl Job {
+    /// A job with the given view space and every other field at its default.
+    pub fn with_view_space(min: [f64; 3], max: [f64; 3]) -> Self {
+        Job {
+            view_space: ViewSpace {
+                min,
+                max,
+                pitch_deg: default_pitch(),
+            },
+            camera: Camera::default(),
+            target_frame_time_ms: default_t_max(),
+            max_error_px: default_max_error(),
+            cost_model: CostModelParams::default(),
+            problem_views: ProblemViewParams::default(),
+            candidates: CandidateParams::default(),
+            memory: MemoryParams::default(),
+        }
+    }
+
+    /// Parses and validates a job; `source` names the file in errors.
+    pub fn from_json(bytes: &[u8], source: &str) -> Result<Job> {
+        let job: Job = serde_json::from_slice(bytes).map_err(|e| {
+            // serde names unknown and missing fields in its message.
+            Error::bad(source, format!("invalid job JSON: {e}"))
+        })?;
+        job.validate(source)?;
+        Ok(job)
+    }
+
+    /// Checks every field's range; the error names `source` and the field.
+    pub fn validate(&self, source: &str) -> Result<()> {
+        let bad = |field: &str, msg: String| Error::bad(format!("{source}: {field}"), msg);
+        let vs = &self.view_space;
+        for (name, v) in [("view_space.min", vs.min), ("view_space.max", vs.max)] {
+            if v.iter().any(|c| !c.is_finite() || c.abs() > 1e9) {
+                return Err(bad(name, format!("{v:?} is not a finite coordinate (|c| ≤ 1e9)")));
+            }
+        }
+        for axis in 0..3 {
+            if vs.min[axis] > vs.max[axis] {
+                return Err(bad(
+                    "view_space",
+                    format!(
+                        "inverted: min[{axis}] = {} is greater than max[{axis}] = {}",
+                        vs.min[axis], vs.max[axis]
+                    ),
+                ));
+            }
+        }
+        if (0..3).all(|a| vs.max[a] - vs.min[a] <= 0.0) {
+            return Err(bad(
+                "view_space",
+                "has zero size (min equals max on every axis); give it an extent".into(),
+            ));
+        }
+        let [lo, hi] = vs.pitch_deg;
+        if !(lo.is_finite() && hi.is_finite() && (-90.0..=90.0).contains(&lo) && (-90.0..=90.0).contains(&hi) && lo <= hi) {
+            return Err(bad(
+                "view_space.pitch_deg",
+                format!("[{lo}, {hi}] must satisfy -90 ≤ lo ≤ hi ≤ 90"),
+            ));
+        }
+        let cam = &self.camera;
+        if !(cam.fov_deg.is_finite() && cam.fov_deg > 0.0 && cam.fov_deg < 170.0) {
+            return Err(bad("camera.fov_deg", format!("{} must be in (0, 170)", cam.fov_deg)));
+        }
+        let [w, h] = cam.resolution;
+        if w == 0 || h == 0 || w > 16384 || h > 16384 {
+            return Err(bad(
+                "camera.resolution",
+                format!("[{w}, {h}] must be between 1 and 16384 pixels per side"),
+            ));
+        }
+        let t = self.target_frame_time_ms;
+        if !(t.is_finite() && t > 0.0 && t <= 1e6) {
+            return Err(bad("target_frame_time_ms", format!("{t} must be a positive number of milliseconds")));
+        }
+        let e = self.max_error_px;
+        if !(e.is_finite() && e > 0.0 && e <= 1e4) {
+            return Err(bad("max_error_px", format!("{e} must be positive")));
+        }
+        let c = &self.cost_model;
+        for (name, v) in [
+            ("cost_model.frame_ms", c.frame_ms),
+            ("cost_model.draw_call_us", c.draw_call_us),
+            ("cost_model.triangle_ns", c.triangle_ns),
+            ("cost_model.pixel_ns", c.pixel_ns),
+        ] {
+            if !(v.is_finite() && (0.0..=1e9).contains(&v)) {
+                return Err(bad(name, format!("{v} must be a finite non-negative number")));
+            }
+        }
+        if c.combine == Combine::Primitives && c.triangle_ns <= 0.0 {
+            return Err(bad("cost_model.triangle_ns", "must be positive in the primitives mode".into()));
+        }
+        let pv = &self.problem_views;
+        if !(pv.cell_size.is_finite() && pv.cell_size > 0.0) {
+            return Err(bad("problem_views.cell_size", format!("{} must be positive", pv.cell_size)));
+        }
+        let cells: f64 = (0..3)
+            .map(|a| ((vs.max[a] - vs.min[a]) / pv.cell_size).ceil().max(1.0))
+            .product();
+        if cells > MAX_CELLS {
+            return Err(bad(
+                "problem_views.cell_size",
+                format!("{} m makes {cells:.0} cells over the view space (at most {MAX_CELLS:.0}); use larger cells", pv.cell_size),
+            ));
+        }
+        if !(pv.min_vdi_deg.is_finite() && (0.5..=90.0).contains(&pv.min_vdi_deg)) {
+            return Err(bad("problem_views.min_vdi_deg", format!("{} must be in [0.5, 90]", pv.min_vdi_deg)));
+        }
+        let cp = &self.candidates;
+        if cp.apex_angles_deg.is_empty() && cp.view_cells != ViewCellKind::Boxes {
+            return Err(bad("candidates.apex_angles_deg", "needs at least one angle for shafts".into()));
+        }
+        if cp.apex_angles_deg.len() > 16 {
+            return Err(bad("candidates.apex_angles_deg", "at most 16 angles".into()));
+        }
+        for &a in &cp.apex_angles_deg {
+            if !(a.is_finite() && a > 0.0 && a <= 180.0) {
+                return Err(bad("candidates.apex_angles_deg", format!("{a} must be in (0, 180]")));
+            }
+        }
+        if !(cp.direction_step_deg.is_finite() && (1.0..=90.0).contains(&cp.direction_step_deg)) {
+            return Err(bad(
+                "candidates.direction_step_deg",
+                format!("{} must be in [1, 90]", cp.direction_step_deg),
+            ));
+        }
+        if cp.min_distance_doublings > 30 {
+            return Err(bad(
+                "candidates.min_distance_doublings",
+                format!("{} must be at most 30", cp.min_distance_doublings),
+            ));
+        }
+        let m = &self.memory;
+        if !(m.bytes_per_texel.is_finite() && m.bytes_per_texel > 0.0 && m.bytes_per_texel <= 64.0) {
+            return Err(bad("memory.bytes_per_texel", format!("{} must be in (0, 64]", m.bytes_per_texel)));
+        }
+        if !(4..=16384).contains(&m.max_texture_size) {
+            return Err(bad(
+                "memory.max_texture_size",
+                format!("{} must be in [4, 16384]", m.max_texture_size),
+            ));
+        }
+        Ok(())
+    }
+
+    /// View space minimum as a vector.
+    pub fn vs_min(&self) -> DVec3 {
+        DVec3::from_array(self.view_space.min)
+    }
+
+    /// View space maximum as a vector.
+    pub fn vs_max(&self) -> DVec3 {
+        DVec3::from_array(self.view_space.max)
+    }
+
+    /// Angle one pixel subtends at the screen centre, radians:
+    /// `θ = 2·tan(fovy/2)/H`.
+    pub fn pixel_angle(&self) -> f64 {
+        2.0 * (self.camera.fov_deg.to_radians() * 0.5).tan() / f64::from(self.camera.resolution[1])
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn parse(s: &str) -> Result<Job> {
+        Job::from_json(s.as_bytes(), "job.json")
+    }
+
+    #[test]
+    fn defaults_are_the_papers_reference_values() {
+        let j = parse(r#"{"view_space":{"min":[0,1.5,0],"max":[100,2,100]}}"#).unwrap();
+        assert_eq!(j.target_frame_time_ms, 16.0);
+        assert_eq!(j.camera.fov_deg, 45.0);
+        assert_eq!(j.camera.resolution, [512, 512]);
+        assert_eq!(j.problem_views.cell_size, 23.0);
+        assert_eq!(j.problem_views.min_vdi_deg, 11.25);
+        assert_eq!(j.candidates.apex_angles_deg, vec![11.25, 22.5, 45.0, 90.0]);
+        assert_eq!(j.candidates.min_distance_doublings, 10);
+        assert_eq!(j.max_error_px, 1.0);
+        assert_eq!(j.view_space.pitch_deg, [-90.0, 90.0]);
+        // θ for 45° and 512 rows.
+        assert!((j.pixel_angle() - 2.0 * (22.5f64).to_radians().tan() / 512.0).abs() < 1e-15);
+    }
+
+    #[test]
+    fn bad_fields_are_named() {
+        let cases = [
+            (r#"{"view_space":{"min":[0,0,0],"max":[1,1,1]},"bogus":1}"#, "bogus"),
+            (r#"{"view_space":{"min":[5,0,0],"max":[1,1,1]}}"#, "inverted"),
+            (r#"{"view_space":{"min":[1,1,1],"max":[1,1,1]}}"#, "zero size"),
+            (r#"{"view_space":{"min":[0,0,0],"max":[1,1,1]},"target_frame_time_ms":-3}"#, "target_frame_time_ms"),
+            (r#"{"view_space":{"min":[0,0,0],"max":[1,1,1]},"camera":{"fov_deg":0}}"#, "camera.fov_deg"),
+            (r#"{"view_space":{"min":[0,0,0],"max":[1,1,1],"pitch_deg":[10,-10]}}"#, "pitch_deg"),
+            (r#"{"view_space":{"min":[0,0,0],"max":[1e6,1,1e6]},"problem_views":{"cell_size":1}}"#, "cell_size"),
+            (r#"{"camera":{}}"#, "view_space"),
+        ];
+        for (json, needle) in cases {
+            let err = parse(json).unwrap_err().to_string();
+            assert!(err.contains(needle), "{json}: {err}");
+            assert!(err.starts_with("job.json"), "{err}");
+        }
+    }
+}

@@ -1,0 +1,198 @@
+//! The placement: the output of `impostor place`
+//! (`schemas/placement.schema.json`). Deterministic and diffable; timings and
+//! counters go to [`Stats`] only.
+
+use schemars::JsonSchema;
+use serde::{Deserialize, Serialize};
+
+/// A placement.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct Placement {
+    /// Totals.
+    pub summary: Summary,
+    /// The impostors; `id` is the index.
+    pub impostors: Vec<PlacedImpostor>,
+    /// The conservative problem views, solved and unsolved; `id` is the index.
+    pub cpvs: Vec<PlacedCpv>,
+}
+
+/// Placement totals.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct Summary {
+    /// Number of CPVs.
+    pub cpvs: u64,
+    /// Number of impostor candidates generated.
+    pub candidates: u64,
+    /// Number of impostors placed.
+    pub impostors: u64,
+    /// Total impostor memory, bytes.
+    pub memory_bytes: u64,
+    /// CPVs whose estimated time still exceeds the target.
+    pub unsolved_cpvs: u64,
+    /// The target frame time the placement was made for, ms.
+    pub target_frame_time_ms: f64,
+}
+
+/// A bounding sphere.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct SphereJson {
+    /// Centre `[x, y, z]`.
+    pub center: [f64; 3],
+    /// Radius, metres.
+    pub radius: f64,
+}
+
+/// A view cell.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(rename_all = "lowercase", deny_unknown_fields)]
+pub enum ViewCellJson {
+    /// `{v : |v − apex| ≥ min_distance, ∠(v − apex, axis) ≤ half_angle}`.
+    Shaft {
+        /// Apex (the cluster centre).
+        apex: [f64; 3],
+        /// Unit axis.
+        axis: [f64; 3],
+        /// Half the apex angle, degrees.
+        half_angle_deg: f64,
+        /// Minimum distance from the apex, metres.
+        min_distance: f64,
+    },
+    /// An axis-aligned box of viewpoints.
+    Box {
+        /// Minimum corner.
+        min: [f64; 3],
+        /// Maximum corner.
+        max: [f64; 3],
+    },
+}
+
+/// One impostor.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct PlacedImpostor {
+    /// Index in `impostors`.
+    pub id: u32,
+    /// The cluster's node id in the object hierarchy.
+    pub node: u32,
+    /// The object ids it represents, ascending.
+    pub objects: Vec<u32>,
+    /// Bounding sphere of the cluster (contains every object's sphere).
+    pub sphere: SphereJson,
+    /// Where it is valid.
+    pub view_cell: ViewCellJson,
+    /// Number of layers.
+    pub layers: u32,
+    /// Texels per side of each layer.
+    pub resolution: u32,
+    /// Texture memory, bytes.
+    pub memory_bytes: u64,
+    /// Estimated render time from the view cell's closest point, ms.
+    pub time_ms: f64,
+}
+
+/// A 3D region.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct RegionJson {
+    /// Minimum corner.
+    pub min: [f64; 3],
+    /// Maximum corner.
+    pub max: [f64; 3],
+}
+
+/// A view-direction interval on a cube face.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct DirectionsJson {
+    /// Cube face `2·axis + (0 if positive else 1)`.
+    pub face: u8,
+    /// `[u_lo, u_hi]` face coordinates.
+    pub u: [f64; 2],
+    /// `[v_lo, v_hi]` face coordinates.
+    pub v: [f64; 2],
+}
+
+/// One conservative problem view.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct PlacedCpv {
+    /// Index in `cpvs`.
+    pub id: u32,
+    /// Its 3D region.
+    pub region: RegionJson,
+    /// Its view directions.
+    pub directions: DirectionsJson,
+    /// Estimated time without impostors, ms.
+    pub time_ms_original: f64,
+    /// Estimated time with its impostors, ms.
+    pub time_ms_final: f64,
+    /// True when `time_ms_final` is within the target.
+    pub solved: bool,
+    /// Ids of the impostors to draw in this CPV, ascending.
+    pub impostors: Vec<u32>,
+}
+
+/// Timings and counters of a run (`--stats`); not deterministic.
+#[derive(Clone, Debug, Default, Serialize, Deserialize, JsonSchema)]
+pub struct Stats {
+    /// Worker threads.
+    pub threads: usize,
+    /// Objects in the scene.
+    pub objects: u64,
+    /// Triangles in the scene.
+    pub triangles: u64,
+    /// Object hierarchy nodes.
+    pub hierarchy_nodes: u64,
+    /// 3D view space cells.
+    pub cells: u64,
+    /// kd regions visited by the subdivision.
+    pub regions_visited: u64,
+    /// Enclosing frusta evaluated.
+    pub enclosing_frusta: u64,
+    /// CPVs.
+    pub cpvs: u64,
+    /// (CPV, cluster) pairs examined by candidate generation.
+    pub candidate_pairs: u64,
+    /// Candidates.
+    pub candidates: u64,
+    /// Greedy choices.
+    pub greedy_choices: u64,
+    /// Score evaluations.
+    pub score_evaluations: u64,
+    /// Impostors removed by pruning.
+    pub pruned: u64,
+    /// Impostors placed.
+    pub impostors: u64,
+    /// Impostor memory, bytes.
+    pub memory_bytes: u64,
+    /// Unsolved CPVs.
+    pub unsolved_cpvs: u64,
+    /// Seconds per stage, in pipeline order.
+    pub seconds: Vec<StageTime>,
+    /// Peak resident memory of the process, bytes (Linux only; 0 elsewhere).
+    pub peak_rss_bytes: u64,
+}
+
+/// Wall time of one stage.
+#[derive(Clone, Debug, Serialize, Deserialize, JsonSchema)]
+pub struct StageTime {
+    /// Stage name.
+    pub stage: String,
+    /// Seconds.
+    pub seconds: f64,
+}
+
+/// Peak resident set size of this process (VmHWM), bytes; 0 when unknown.
+pub fn peak_rss_bytes() -> u64 {
+    std::fs::read_to_string("/proc/self/status")
+        .ok()
+        .and_then(|s| {
+            s.lines()
+                .find(|l| l.starts_with("VmHWM:"))
+                .and_then(|l| l.split_whitespace().nth(1).and_then(|v| v.parse::<u64>().ok()))
+        })
+        .map_or(0, |kb| kb * 1024)
+}

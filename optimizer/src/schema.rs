@@ -1,0 +1,25 @@
+//! JSON Schemas of the wire types, generated from the Rust types. The files
+//! in `schemas/` are these texts; a test checks they are current.
+
+use schemars::schema_for;
+
+use crate::evaluate::Evaluation;
+use crate::job::Job;
+use crate::placement::{Placement, Stats};
+use crate::scene::SceneSummary;
+
+/// `(file name, schema text)` of every wire type.
+pub fn all() -> Vec<(&'static str, String)> {
+    let pretty = |v: schemars::Schema| {
+        let mut s = serde_json::to_string_pretty(&v).expect("schemas serialize");
+        s.push('\n');
+        s
+    };
+    vec![
+        ("job.schema.json", pretty(schema_for!(Job))),
+        ("scene.schema.json", pretty(schema_for!(SceneSummary))),
+        ("placement.schema.json", pretty(schema_for!(Placement))),
+        ("evaluation.schema.json", pretty(schema_for!(Evaluation))),
+        ("stats.schema.json", pretty(schema_for!(Stats))),
+    ]
+}
