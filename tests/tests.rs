@@ -1,1 +1,8 @@
-//! End-to-end tests.
+//! End-to-end tests of the `impostor` command line: the pipeline on generated
+//! and real scenes, bad input, determinism and the JSON Schemas.
+
+mod bad_input;
+mod cli;
+mod real_scenes;
+mod schemas;
+mod util;

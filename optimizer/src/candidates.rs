@@ -20,7 +20,6 @@ use std::f64::consts::PI;
 use glam::DVec3;
 use rayon::prelude::*;
 
-use crate::cost::Cost;
 use crate::geom::Aabb;
 use crate::impostor_model::{ImpostorModel, ImpostorSpec, ViewCell};
 use crate::job::{Job, ViewCellKind};
@@ -37,15 +36,42 @@ pub struct Candidate {
     pub kd: u32,
     /// Layers, resolution, memory.
     pub spec: ImpostorSpec,
+    /// The cells it serves: `Candidates::served[served.0 .. served.0 + served.1]`.
+    pub served: (u32, u32),
 }
 
-/// The generated candidates, ordered by (node, key): ids are indices.
+/// The generated candidates, ordered by (node, key): ids are indices, and
+/// the serving relation at cell granularity.
+///
+/// A *group* is one cell's CPVs that list one cluster: a range of `pairs`,
+/// each pair a CPV id and the cluster's index in that CPV's `node_ids`. A
+/// candidate serves a list of groups (`served`), all of its own cluster.
 #[derive(Clone, Debug, Default)]
 pub struct Candidates {
     /// The candidates.
     pub list: Vec<Candidate>,
-    /// (CPV, cluster) pairs examined.
-    pub pairs: u64,
+    /// (CPV id, index of the cluster in the CPV's `node_ids`), grouped by
+    /// cluster and then by cell.
+    pub pairs: Vec<(u32, u32)>,
+    /// Groups: ranges of `pairs`.
+    pub groups: Vec<(u32, u32)>,
+    /// Group ids served by the candidates (see `Candidate::served`).
+    pub served: Vec<u32>,
+}
+
+impl Candidates {
+    /// Calls `f(cpv id, index of the cluster in the CPV's node_ids)` for every
+    /// CPV candidate `i` may serve (its region lies in the view cell, it lists
+    /// the cluster, and the impostor may accelerate its cell).
+    pub fn for_each_served(&self, i: u32, mut f: impl FnMut(u32, u32)) {
+        let (s, n) = self.list[i as usize].served;
+        for &g in &self.served[s as usize..(s + n) as usize] {
+            let (a, b) = self.groups[g as usize];
+            for &(c, idx) in &self.pairs[a as usize..b as usize] {
+                f(c, idx);
+            }
+        }
+    }
 }
 
 /// Axis grid of shaft directions: azimuth steps always, elevation steps when
@@ -144,44 +170,70 @@ pub fn generate(ctx: &Context, job: &Job, pv: &ProblemViews) -> Candidates {
     alphas.dedup();
     let doublings = job.candidates.min_distance_doublings;
 
-    // Invert the (CPV → clusters) lists into (cluster → CPVs).
+    // Invert the (CPV → clusters) lists into (cluster → CPVs), then split
+    // each cluster's list into groups of one cell (CPVs of one cell are
+    // contiguous, so the groups are too).
     let mut count = vec![0u32; h.nodes.len() + 1];
     for c in &pv.cpvs {
-        for &(n, _) in &c.nodes {
+        for &n in &c.node_ids {
             count[n as usize + 1] += 1;
         }
     }
     for i in 1..count.len() {
         count[i] += count[i - 1];
     }
-    let mut pairs: Vec<(u32, Cost)> = vec![(0, Cost::default()); count[h.nodes.len()] as usize];
+    let mut pairs: Vec<(u32, u32)> = vec![(0, 0); count[h.nodes.len()] as usize];
     let mut fill = count.clone();
     for (ci, c) in pv.cpvs.iter().enumerate() {
-        for &(n, cost) in &c.nodes {
-            pairs[fill[n as usize] as usize] = (ci as u32, cost);
+        for (idx, &n) in c.node_ids.iter().enumerate() {
+            pairs[fill[n as usize] as usize] = (ci as u32, idx as u32);
             fill[n as usize] += 1;
         }
     }
+    drop(fill);
+    let mut groups: Vec<(u32, u32)> = Vec::new();
+    let mut node_groups = vec![(0u32, 0u32); h.nodes.len()];
+    for n in 0..h.nodes.len() {
+        let g0 = groups.len() as u32;
+        let (a, b) = (count[n] as usize, count[n + 1] as usize);
+        let mut s = a;
+        for k in a + 1..=b {
+            if k == b || pv.cpvs[pairs[k].0 as usize].kd != pv.cpvs[pairs[s].0 as usize].kd {
+                groups.push((s as u32, k as u32));
+                s = k;
+            }
+        }
+        node_groups[n] = (g0, groups.len() as u32);
+    }
 
-    let per_node: Vec<Vec<Candidate>> = (0..h.nodes.len() as u32)
+    // Per cluster: the candidates and, for each, the local list of groups it
+    // serves.
+    let per_node: Vec<(Vec<Candidate>, Vec<u32>)> = (0..h.nodes.len() as u32)
         .into_par_iter()
         .map(|n| {
-            let list = &pairs[count[n as usize] as usize..count[n as usize + 1] as usize];
-            if list.is_empty() {
-                return Vec::new();
+            let (g0, g1) = node_groups[n as usize];
+            if g0 == g1 {
+                return (Vec::new(), Vec::new());
             }
             let sphere = h.nodes[n as usize].sphere;
             let size = 2.0 * sphere.radius;
-            let mut keys: Vec<Key> = Vec::new();
-            for &(ci, orig) in list {
-                let cpv = &pv.cpvs[ci as usize];
-                let region = cpv.region;
-                let helps = |spec: &ImpostorSpec, d: f64| {
-                    let imp = ctx.model.impostor(spec.layers, sphere.radius, d);
-                    let cur = cpv.cost;
-                    ctx.model.frame_time(cur - orig + imp) < ctx.model.frame_time(cur)
-                };
+            // (key, group) for every cell inside the key's view cell.
+            let mut tuples: Vec<(Key, u32)> = Vec::new();
+            for g in g0..g1 {
+                let (a, b) = groups[g as usize];
+                let group = &pairs[a as usize..b as usize];
+                let first = &pv.cpvs[group[0].0 as usize];
+                let region = first.region;
                 let dist = region.distance_to_point(sphere.center);
+                // Some CPV of the cell is accelerated by an impostor of `spec`.
+                let helps = |spec: &ImpostorSpec| {
+                    let imp = ctx.model.impostor(spec.layers, sphere.radius, dist);
+                    group.iter().any(|&(ci, idx)| {
+                        let c = &pv.cpvs[ci as usize];
+                        let cur = c.cost;
+                        ctx.model.frame_time(cur - c.node_costs[idx as usize] + imp) < ctx.model.frame_time(cur)
+                    })
+                };
                 if shafts && size > 0.0 && dist >= size {
                     // Largest k with size·2^k ≤ dist.
                     let mut k = 0u32;
@@ -195,98 +247,126 @@ pub fn generate(ctx: &Context, job: &Job, pv: &ProblemViews) -> Candidates {
                         let Some(spec) = imodel.shaft(&sphere, alpha, d_k) else {
                             continue;
                         };
-                        if !helps(&spec, dist) {
+                        if !helps(&spec) {
                             continue;
                         }
                         let cos = alpha.cos() - 1e-12;
                         grid.near(w, alpha, |m, j| {
                             let u = grid.axis(m, j);
                             if corners.iter().all(|c| c.dot(u) >= cos) {
-                                keys.push(Key::Shaft {
-                                    angle: ai as u8,
-                                    m,
-                                    j,
-                                    k,
-                                });
+                                tuples.push((
+                                    Key::Shaft {
+                                        angle: ai as u8,
+                                        m,
+                                        j,
+                                        k,
+                                    },
+                                    g,
+                                ));
                             }
                         });
                     }
                 }
                 if boxes {
-                    let mut kd = cpv.kd;
+                    let mut kd = first.kd;
                     while kd != u32::MAX {
                         let node = &pv.kd[kd as usize];
                         let Some(spec) = imodel.boxed(&sphere, &node.aabb) else {
                             break;
                         };
-                        if helps(&spec, dist) {
-                            keys.push(Key::Box { kd });
+                        if helps(&spec) {
+                            tuples.push((Key::Box { kd }, g));
                         }
                         kd = node.parent;
                     }
                 }
             }
-            keys.sort_unstable();
-            keys.dedup();
-            keys.into_iter()
-                .filter_map(|key| match key {
-                    Key::Shaft { angle, m, j, k } => {
-                        let alpha = alphas[angle as usize];
-                        let d = size * f64::from(1u32 << k.min(31));
-                        let spec = imodel.shaft(&sphere, alpha, d)?;
-                        Some(Candidate {
-                            node: n,
-                            cell: ViewCell::Shaft {
-                                apex: sphere.center,
-                                axis: grid.axis(m, j),
-                                half_angle: alpha,
-                                min_distance: d,
-                            },
-                            kd: u32::MAX,
-                            spec,
-                        })
+            // Shafts of one (angle, axis) sorted by k descending: the shaft with
+            // minimum distance d_k serves every cell whose own k is ≥ k, a
+            // prefix of the block. Boxes serve exactly their block.
+            tuples.sort_unstable_by(|(ka, ga), (kb, gb)| match (ka, kb) {
+                (
+                    Key::Shaft { angle: a1, m: m1, j: j1, k: k1 },
+                    Key::Shaft { angle: a2, m: m2, j: j2, k: k2 },
+                ) => (a1, m1, j1, std::cmp::Reverse(k1), ga).cmp(&(a2, m2, j2, std::cmp::Reverse(k2), gb)),
+                _ => (ka, ga).cmp(&(kb, gb)),
+            });
+            let mut cands = Vec::new();
+            let mut served: Vec<u32> = Vec::with_capacity(tuples.len());
+            let mut i = 0;
+            while i < tuples.len() {
+                // One block: same (angle, axis) for shafts, same kd for boxes.
+                let same_block = |a: &Key, b: &Key| match (a, b) {
+                    (Key::Shaft { angle: a1, m: m1, j: j1, .. }, Key::Shaft { angle: a2, m: m2, j: j2, .. }) => {
+                        (a1, m1, j1) == (a2, m2, j2)
                     }
-                    Key::Box { kd } => {
-                        let aabb: Aabb = pv.kd[kd as usize].aabb;
-                        let spec = imodel.boxed(&sphere, &aabb)?;
-                        Some(Candidate {
-                            node: n,
-                            cell: ViewCell::Box(aabb),
-                            kd,
-                            spec,
-                        })
+                    _ => a == b,
+                };
+                let mut e = i;
+                while e < tuples.len() && same_block(&tuples[i].0, &tuples[e].0) {
+                    e += 1;
+                }
+                let start = served.len() as u32;
+                served.extend(tuples[i..e].iter().map(|t| t.1));
+                // One candidate per distinct key of the block, serving the
+                // block's prefix up to the end of its key.
+                let mut s = i;
+                while s < e {
+                    let mut t = s;
+                    while t < e && tuples[t].0 == tuples[s].0 {
+                        t += 1;
                     }
-                })
-                .collect()
+                    let len = (t - i) as u32;
+                    let cand = match tuples[s].0 {
+                        Key::Shaft { angle, m, j, k } => {
+                            let alpha = alphas[angle as usize];
+                            let d = size * f64::from(1u32 << k.min(31));
+                            imodel.shaft(&sphere, alpha, d).map(|spec| Candidate {
+                                node: n,
+                                cell: ViewCell::Shaft {
+                                    apex: sphere.center,
+                                    axis: grid.axis(m, j),
+                                    half_angle: alpha,
+                                    min_distance: d,
+                                },
+                                kd: u32::MAX,
+                                spec,
+                                served: (start, len),
+                            })
+                        }
+                        Key::Box { kd } => {
+                            let aabb: Aabb = pv.kd[kd as usize].aabb;
+                            imodel.boxed(&sphere, &aabb).map(|spec| Candidate {
+                                node: n,
+                                cell: ViewCell::Box(aabb),
+                                kd,
+                                spec,
+                                served: (start, len),
+                            })
+                        }
+                    };
+                    cands.extend(cand);
+                    s = t;
+                }
+                i = e;
+            }
+            (cands, served)
         })
         .collect();
+    let mut list = Vec::new();
+    let mut served = Vec::new();
+    for (mut cands, local) in per_node {
+        let offset = served.len() as u32;
+        for c in &mut cands {
+            c.served.0 += offset;
+        }
+        list.extend(cands);
+        served.extend(local);
+    }
     Candidates {
-        list: per_node.into_iter().flatten().collect(),
-        pairs: pairs.len() as u64,
-    }
-}
-
-/// Calls `f(cpv id)` for every CPV whose region lies inside the candidate's
-/// view cell (the CPVs it may serve), in increasing id order.
-pub fn for_each_contained(pv: &ProblemViews, cand: &Candidate, mut f: impl FnMut(u32)) {
-    if cand.kd != u32::MAX {
-        let (s, e) = pv.kd[cand.kd as usize].cpvs;
-        (s..e).for_each(f);
-        return;
-    }
-    let mut stack = vec![0u32];
-    while let Some(k) = stack.pop() {
-        let node = &pv.kd[k as usize];
-        if node.cpvs.0 == node.cpvs.1 || !cand.cell.may_intersect_box(&node.aabb) {
-            continue;
-        }
-        if cand.cell.contains_box(&node.aabb) {
-            (node.cpvs.0..node.cpvs.1).for_each(&mut f);
-            continue;
-        }
-        if let Some([l, r]) = node.children {
-            stack.push(r);
-            stack.push(l);
-        }
+        list,
+        pairs,
+        groups,
+        served,
     }
 }

@@ -18,7 +18,7 @@ use std::collections::BinaryHeap;
 
 use rayon::prelude::*;
 
-use crate::candidates::{Candidate, Candidates, for_each_contained};
+use crate::candidates::{Candidate, Candidates};
 use crate::cost::Cost;
 use crate::problem_views::{Context, Cpv, ProblemViews};
 
@@ -75,6 +75,13 @@ struct State<'a> {
     ctx: &'a Context<'a>,
     pv: &'a ProblemViews,
     cands: &'a [Candidate],
+    all: &'a Candidates,
+    /// Per CPV, per listed cluster: the cost of its current representation
+    /// (its objects, with descendant impostors swapped in).
+    rep: Vec<Vec<Cost>>,
+    /// Per CPV, per listed cluster: represented by an impostor of itself or
+    /// of an ancestor.
+    covered: Vec<Vec<bool>>,
     sel: Selection,
 }
 
@@ -91,6 +98,9 @@ impl<'a> State<'a> {
             ctx,
             pv,
             cands: &cands.list,
+            all: cands,
+            rep: pv.cpvs.iter().map(|c| c.node_costs.clone()).collect(),
+            covered: pv.cpvs.iter().map(|c| vec![false; c.node_ids.len()]).collect(),
             sel: Selection {
                 cpv_impostors: vec![Vec::new(); pv.cpvs.len()],
                 cpv_cost: pv.cpvs.iter().map(|c| c.cost).collect(),
@@ -111,23 +121,13 @@ impl<'a> State<'a> {
             .impostor(cand.spec.layers, s.radius, cpv.region.distance_to_point(s.center))
     }
 
-    fn effect(&self, i: u32, c: u32) -> Option<Effect> {
-        let cand = &self.cands[i as usize];
+    fn effect(&self, i: u32, c: u32, idx: u32) -> Option<Effect> {
         let cpv = &self.pv.cpvs[c as usize];
-        let orig = cpv.node_cost(cand.node)?;
-        let h = self.ctx.hierarchy;
-        // Current cost of the cluster's representation in this CPV.
-        let mut rep = orig;
-        for &j in &self.sel.cpv_impostors[c as usize] {
-            let nj = self.cands[j as usize].node;
-            if nj == cand.node || h.is_descendant(cand.node, nj) {
-                return None; // already represented by j
-            }
-            if h.is_descendant(nj, cand.node) {
-                let oj = cpv.node_cost(nj)?;
-                rep = rep - (oj - self.impostor_cost(j, cpv));
-            }
+        let idx = idx as usize;
+        if self.covered[c as usize][idx] {
+            return None;
         }
+        let rep = self.rep[c as usize][idx];
         let cur = self.sel.cpv_cost[c as usize];
         let new_cost = cur - rep + self.impostor_cost(i, cpv);
         let m = &self.ctx.model;
@@ -141,8 +141,8 @@ impl<'a> State<'a> {
 
     fn score(&self, i: u32) -> f64 {
         let mut sum = 0.0;
-        for_each_contained(self.pv, &self.cands[i as usize], |c| {
-            if let Some(e) = self.effect(i, c) {
+        self.all.for_each_served(i, |c, idx| {
+            if let Some(e) = self.effect(i, c, idx) {
                 sum += e.delta;
             }
         });
@@ -150,18 +150,38 @@ impl<'a> State<'a> {
     }
 
     fn accept(&mut self, i: u32) {
-        let mut changes: Vec<(u32, Cost)> = Vec::new();
-        for_each_contained(self.pv, &self.cands[i as usize], |c| {
-            if let Some(e) = self.effect(i, c) {
+        let mut changes: Vec<(u32, u32, Cost)> = Vec::new();
+        self.all.for_each_served(i, |c, idx| {
+            if let Some(e) = self.effect(i, c, idx) {
                 if e.accelerates {
-                    changes.push((c, e.new_cost));
+                    changes.push((c, idx, e.new_cost));
                 }
             }
         });
         let h = self.ctx.hierarchy;
         let node = self.cands[i as usize].node;
-        for (c, cost) in changes {
-            let list = &mut self.sel.cpv_impostors[c as usize];
+        let end = h.nodes[node as usize].subtree_end;
+        for (c, idx, cost) in changes {
+            let cu = c as usize;
+            let cpv = &self.pv.cpvs[cu];
+            let idx = idx as usize;
+            let saving = self.rep[cu][idx] - self.impostor_cost(i, cpv);
+            // The cluster and every listed descendant are now represented.
+            for k in idx..cpv.node_ids.len() {
+                if cpv.node_ids[k] >= end {
+                    break;
+                }
+                self.covered[cu][k] = true;
+            }
+            // Every listed ancestor's representation got cheaper.
+            let mut a = h.nodes[node as usize].parent;
+            while a != u32::MAX {
+                if let Some(ai) = cpv.node_index(a) {
+                    self.rep[cu][ai] = self.rep[cu][ai] - saving;
+                }
+                a = h.nodes[a as usize].parent;
+            }
+            let list = &mut self.sel.cpv_impostors[cu];
             let cands = self.cands;
             let uses = &mut self.sel.uses;
             list.retain(|&j| {
@@ -173,13 +193,19 @@ impl<'a> State<'a> {
             });
             list.push(i);
             self.sel.uses[i as usize] += 1;
-            self.sel.cpv_cost[c as usize] = cost;
+            self.sel.cpv_cost[cu] = cost;
         }
         self.sel.accepted += 1;
     }
 }
 
 /// Lazy greedy selection.
+///
+/// Keys carry the state version they were computed in; a key popped with the
+/// current version is exact and, being the largest of upper bounds, is the
+/// greedy choice. Stale keys are recomputed a batch at a time in parallel.
+/// Every choice is the exact greedy choice, so the result does not depend on
+/// the batch size or the thread count.
 pub fn select_lazy(ctx: &Context, pv: &ProblemViews, cands: &Candidates) -> Selection {
     let mut st = State::new(ctx, pv, cands);
     let initial: Vec<f64> = (0..cands.list.len() as u32)
@@ -187,22 +213,39 @@ pub fn select_lazy(ctx: &Context, pv: &ProblemViews, cands: &Candidates) -> Sele
         .map(|i| st.score(i))
         .collect();
     st.sel.evaluations = initial.len() as u64;
-    let mut heap: BinaryHeap<Key> = initial
+    let mut heap: BinaryHeap<(Key, u64)> = initial
         .into_iter()
         .enumerate()
         .filter(|&(_, s)| s > 0.0)
-        .map(|(i, score)| Key { score, id: i as u32 })
+        .map(|(i, score)| (Key { score, id: i as u32 }, 0))
         .collect();
-    while let Some(top) = heap.pop() {
-        let score = st.score(top.id);
-        st.sel.evaluations += 1;
-        if score <= 0.0 {
+    let batch = 2 * rayon::current_num_threads().max(1);
+    let mut version = 0u64;
+    let mut stale: Vec<u32> = Vec::with_capacity(batch);
+    while let Some(&(top, stamp)) = heap.peek() {
+        if stamp == version {
+            heap.pop();
+            st.accept(top.id);
+            version += 1;
             continue;
         }
-        let fresh = Key { score, id: top.id };
-        match heap.peek() {
-            Some(next) if fresh < *next => heap.push(fresh),
-            _ => st.accept(top.id),
+        // Recompute the stale keys at the top, up to a batch, in parallel.
+        stale.clear();
+        while stale.len() < batch {
+            match heap.peek() {
+                Some(&(k, s)) if s != version => {
+                    heap.pop();
+                    stale.push(k.id);
+                }
+                _ => break,
+            }
+        }
+        let fresh: Vec<f64> = stale.par_iter().map(|&i| st.score(i)).collect();
+        st.sel.evaluations += fresh.len() as u64;
+        for (&id, score) in stale.iter().zip(fresh) {
+            if score > 0.0 {
+                heap.push((Key { score, id }, version));
+            }
         }
     }
     st.sel
@@ -242,12 +285,8 @@ pub fn select_naive(ctx: &Context, pv: &ProblemViews, cands: &Candidates) -> Sel
 /// draws its cluster's objects as geometry there again; a removal is kept
 /// only if every CPV using the impostor stays within `t_max`.
 pub fn prune(ctx: &Context, pv: &ProblemViews, cands: &Candidates, sel: &mut Selection) {
-    let st = State {
-        ctx,
-        pv,
-        cands: &cands.list,
-        sel: sel.clone(),
-    };
+    let mut st = State::new(ctx, pv, cands);
+    st.sel = sel.clone();
     let mut order = st.sel.impostors();
     order.sort_by_key(|&i| (std::cmp::Reverse(cands.list[i as usize].spec.memory_bytes), i));
     let mut users: Vec<Vec<u32>> = vec![Vec::new(); cands.list.len()];
@@ -256,7 +295,6 @@ pub fn prune(ctx: &Context, pv: &ProblemViews, cands: &Candidates, sel: &mut Sel
             users[i as usize].push(c as u32);
         }
     }
-    let mut st = st;
     for i in order {
         let mut new_costs = Vec::with_capacity(users[i as usize].len());
         let mut ok = true;

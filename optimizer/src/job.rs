@@ -84,7 +84,7 @@ pub struct CostModelParams {
     /// Fixed cost per frame (clear, swap, setup), milliseconds. Default 2.
     #[serde(default = "default_frame_ms")]
     pub frame_ms: f64,
-    /// Cost per draw call, microseconds. Default 8.
+    /// Cost per draw call, microseconds. Default 1.25.
     #[serde(default = "default_draw_call_us")]
     pub draw_call_us: f64,
     /// Cost per triangle, nanoseconds. Default 0.5.
@@ -177,7 +177,7 @@ fn default_frame_ms() -> f64 {
     2.0
 }
 fn default_draw_call_us() -> f64 {
-    8.0
+    1.25
 }
 fn default_triangle_ns() -> f64 {
     0.5

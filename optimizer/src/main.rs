@@ -40,6 +40,9 @@ enum Command {
         /// Remove impostors not needed to keep every problem view within the target.
         #[arg(long)]
         prune: bool,
+        /// Print each stage's wall time to stderr.
+        #[arg(short, long)]
+        verbose: bool,
     },
     /// Check a placement independently with random views and exact frusta.
     Evaluate {
@@ -78,6 +81,11 @@ enum Command {
         /// Output file (default: standard output for --summary; required for GLB).
         #[arg(short, long)]
         out: Option<PathBuf>,
+    },
+    /// Print a scene's statistics: objects, triangles, draw calls, bounds.
+    Info {
+        /// Scene: .glb, .gltf or a JSON scene summary.
+        scene: PathBuf,
     },
     /// Write the JSON Schemas of the job, scene summary, placement and
     /// evaluation files.
@@ -142,11 +150,12 @@ fn run(cli: Cli) -> Result<ExitCode> {
             threads,
             stats,
             prune,
+            verbose,
         } => {
             set_threads(threads)?;
             let job = read_job(&job)?;
             let scene = gltf_load::load_scene_file(&scene)?;
-            let output = place(&scene, &job, &PlaceOptions { prune, progress: true });
+            let output = place(&scene, &job, &PlaceOptions { prune, progress: true, verbose });
             write_output(out.as_deref(), &json(&output.placement)?)?;
             if let Some(s) = stats {
                 write_output(Some(&s), &json(&output.stats)?)?;
@@ -204,6 +213,19 @@ fn run(cli: Cli) -> Result<ExitCode> {
                 let out = out.ok_or_else(|| Error::bad("gen-city", "-o FILE is required for the GLB (or use --summary)"))?;
                 write_output(Some(&out), &glb)?;
             }
+            Ok(ExitCode::SUCCESS)
+        }
+        Command::Info { scene } => {
+            let scene = gltf_load::load_scene_file(&scene)?;
+            let (lo, hi) = scene.bounds();
+            let calls: u64 = scene.objects.iter().map(|o| u64::from(o.draw_calls)).sum();
+            let info = serde_json::json!({
+                "objects": scene.objects.len(),
+                "triangles": scene.total_triangles(),
+                "draw_calls": calls,
+                "bounds": { "min": lo.to_array(), "max": hi.to_array() },
+            });
+            write_output(None, &json(&info)?)?;
             Ok(ExitCode::SUCCESS)
         }
         Command::Schema { out_dir } => {

@@ -24,6 +24,8 @@ pub struct PlaceOptions {
     pub prune: bool,
     /// Show progress spinners on stderr (hidden when stderr is not a terminal).
     pub progress: bool,
+    /// Print each stage's wall time to stderr as it finishes.
+    pub verbose: bool,
 }
 
 /// The result of [`place`].
@@ -37,12 +39,13 @@ pub struct PlaceOutput {
 
 struct Stages {
     bar: Option<ProgressBar>,
+    verbose: bool,
     start: Instant,
     times: Vec<StageTime>,
 }
 
 impl Stages {
-    fn new(progress: bool) -> Self {
+    fn new(progress: bool, verbose: bool) -> Self {
         let bar = progress.then(|| {
             let b = ProgressBar::new_spinner();
             b.set_style(ProgressStyle::with_template("{spinner} [{elapsed_precise}] {msg}").expect("valid template"));
@@ -51,6 +54,7 @@ impl Stages {
         });
         Stages {
             bar,
+            verbose,
             start: Instant::now(),
             times: Vec::new(),
         }
@@ -64,9 +68,17 @@ impl Stages {
     }
 
     fn end(&mut self, stage: &str) {
+        let seconds = self.start.elapsed().as_secs_f64();
+        if self.verbose {
+            let line = format!("{stage}: {seconds:.2} s");
+            match &self.bar {
+                Some(b) if !b.is_hidden() => b.println(line),
+                _ => eprintln!("{line}"),
+            }
+        }
         self.times.push(StageTime {
             stage: stage.into(),
-            seconds: self.start.elapsed().as_secs_f64(),
+            seconds,
         });
     }
 }
@@ -81,7 +93,7 @@ impl Drop for Stages {
 
 /// Places impostors for `job` over a validated `scene`.
 pub fn place(scene: &Scene, job: &Job, opts: &PlaceOptions) -> PlaceOutput {
-    let mut st = Stages::new(opts.progress);
+    let mut st = Stages::new(opts.progress, opts.verbose);
     st.begin("building the object hierarchy");
     let hierarchy = Hierarchy::build(scene);
     st.end("hierarchy");
@@ -117,7 +129,7 @@ pub fn place(scene: &Scene, job: &Job, opts: &PlaceOptions) -> PlaceOutput {
         regions_visited: pv.regions_visited,
         enclosing_frusta: pv.cone_evaluations,
         cpvs: pv.cpvs.len() as u64,
-        candidate_pairs: cands.pairs,
+        candidate_pairs: cands.pairs.len() as u64,
         candidates: cands.list.len() as u64,
         greedy_choices: sel.accepted,
         score_evaluations: sel.evaluations,
@@ -304,7 +316,7 @@ mod tests {
         let scene = synthetic_city(2, 5, 5);
         let job = synthetic_job(5, 5);
         let plain = place(&scene, &job, &PlaceOptions::default()).placement;
-        let pruned = place(&scene, &job, &PlaceOptions { prune: true, progress: false }).placement;
+        let pruned = place(&scene, &job, &PlaceOptions { prune: true, ..PlaceOptions::default() }).placement;
         assert!(pruned.summary.memory_bytes <= plain.summary.memory_bytes);
         assert_eq!(pruned.summary.unsolved_cpvs, plain.summary.unsolved_cpvs);
         let eval = evaluate(&scene, &job, &pruned, &EvalOptions { views: 2000, seed: 1 }, "p.json").unwrap();

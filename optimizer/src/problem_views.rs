@@ -130,20 +130,25 @@ pub struct Cpv {
     pub cost: Cost,
     /// Estimated frame time `t_enc`, ms.
     pub time: f64,
-    /// The clusters meeting the enclosing frustum that do not meet the region
-    /// (only those can become impostors here), sorted by node id, with the
-    /// cost of their objects inside the enclosing frustum.
-    pub nodes: Vec<(u32, Cost)>,
+    /// The clusters that may become impostors here, sorted by node id: they
+    /// meet the enclosing frustum, do not meet the region, and a one-layer
+    /// impostor of them would be cheaper than their objects in the frustum.
+    pub node_ids: Vec<u32>,
+    /// For each of `node_ids`, the cost of the cluster's objects inside the
+    /// enclosing frustum.
+    pub node_costs: Vec<Cost>,
 }
 
 impl Cpv {
+    /// Index of cluster `node` in `node_ids`, if it may be replaced here.
+    pub fn node_index(&self, node: u32) -> Option<usize> {
+        self.node_ids.binary_search(&node).ok()
+    }
+
     /// Original cost of cluster `node`'s objects in this CPV, if it may be
     /// replaced here.
     pub fn node_cost(&self, node: u32) -> Option<Cost> {
-        self.nodes
-            .binary_search_by_key(&node, |&(n, _)| n)
-            .ok()
-            .map(|i| self.nodes[i].1)
+        self.node_index(node).map(|i| self.node_costs[i])
     }
 }
 
@@ -412,14 +417,24 @@ fn process(ctx: &Context, kd: &[KdNode], id: u32, parent_problems: &[Vdi], leaf_
                     let cone = enclosing_cone(&region, &vdi, ctx.half_diagonal);
                     let mut nodes = Vec::new();
                     let cost = enclosed_cost(ctx, &costs, &cone, &region, Some(&mut nodes));
+                    let t = ctx.model.frame_time(cost);
+                    let h = ctx.hierarchy;
+                    // Keep the clusters some impostor could accelerate: an
+                    // impostor has at least one layer.
+                    nodes.retain(|&(n, orig)| {
+                        let s = h.nodes[n as usize].sphere;
+                        let imp = ctx.model.impostor(1, s.radius, region.distance_to_point(s.center));
+                        ctx.model.frame_time(cost - orig + imp) < t
+                    });
                     nodes.sort_unstable_by_key(|&(n, _)| n);
                     Cpv {
                         kd: id,
                         region,
                         vdi,
                         cost,
-                        time: ctx.model.frame_time(cost),
-                        nodes,
+                        time: t,
+                        node_ids: nodes.iter().map(|&(n, _)| n).collect(),
+                        node_costs: nodes.iter().map(|&(_, c)| c).collect(),
                     }
                 })
                 .collect();

@@ -1,0 +1,80 @@
+//! Helpers: the `impostor` binary, temporary directories, JSON files.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+use std::sync::OnceLock;
+
+/// The workspace root.
+pub fn root() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+}
+
+/// The `impostor` binary of the same profile as this test, built on first use.
+pub fn impostor() -> &'static Path {
+    static BIN: OnceLock<PathBuf> = OnceLock::new();
+    BIN.get_or_init(|| {
+        let exe = std::env::current_exe().expect("test executable path");
+        // target/<profile>/deps/e2e-<hash>
+        let profile_dir = exe.parent().and_then(Path::parent).expect("target/<profile>");
+        let profile = profile_dir.file_name().unwrap().to_string_lossy().into_owned();
+        let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
+        let mut cmd = Command::new(cargo);
+        cmd.current_dir(root()).args(["build", "--quiet", "-p", "optimizer", "--bin", "impostor"]);
+        if profile != "debug" {
+            cmd.args(["--profile", if profile == "release" { "release" } else { &profile }]);
+        }
+        let status = cmd.status().expect("run cargo build");
+        assert!(status.success(), "building the impostor binary failed");
+        let bin = profile_dir.join(format!("impostor{}", std::env::consts::EXE_SUFFIX));
+        assert!(bin.exists(), "{} missing", bin.display());
+        bin
+    })
+}
+
+/// Runs `impostor` with `args`.
+pub fn run(args: &[&str]) -> Output {
+    Command::new(impostor()).args(args).output().expect("run impostor")
+}
+
+/// Exit code of an output, `-1` when killed.
+pub fn code(o: &Output) -> i32 {
+    o.status.code().unwrap_or(-1)
+}
+
+/// Standard error as text.
+pub fn stderr(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stderr).into_owned()
+}
+
+/// A fresh temporary directory for one test.
+pub fn tmp(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("impostor-e2e-{}-{name}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+/// Reads a JSON file.
+pub fn read_json(p: &Path) -> serde_json::Value {
+    serde_json::from_slice(&std::fs::read(p).unwrap_or_else(|e| panic!("{}: {e}", p.display())))
+        .unwrap_or_else(|e| panic!("{}: {e}", p.display()))
+}
+
+/// Path as &str.
+pub fn s(p: &Path) -> &str {
+    p.to_str().unwrap()
+}
+
+/// A generated city of the given scale, cached per test process.
+pub fn city(scale: &str) -> PathBuf {
+    static DIR: OnceLock<PathBuf> = OnceLock::new();
+    let dir = DIR.get_or_init(|| tmp("cities"));
+    let path = dir.join(format!("city-{scale}.glb"));
+    static LOCK: std::sync::Mutex<()> = std::sync::Mutex::new(());
+    let _g = LOCK.lock().unwrap();
+    if !path.exists() {
+        let o = run(&["gen-city", "--scale", scale, "--seed", "1", "-o", s(&path)]);
+        assert_eq!(code(&o), 0, "{}", stderr(&o));
+    }
+    path
+}
