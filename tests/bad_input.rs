@@ -73,7 +73,11 @@ fn truncated_glb() {
 fn nan_vertex() {
     let dir = tmp("nan");
     let p = dir.join("nan.glb");
-    std::fs::write(&p, triangle_glb([0.0, 0.0, 0.0, f32::NAN, 0.0, 0.0, 0.0, 1.0, 0.0])).unwrap();
+    std::fs::write(
+        &p,
+        triangle_glb([0.0, 0.0, 0.0, f32::NAN, 0.0, 0.0, 0.0, 1.0, 0.0]),
+    )
+    .unwrap();
     expect_bad(&dir, &p, &job_json(""), &["nan.glb", "not finite"]);
 }
 
@@ -84,7 +88,11 @@ fn empty_scenes() {
     std::fs::write(&p, r#"{"objects":[]}"#).unwrap();
     expect_bad(&dir, &p, &job_json(""), &["empty.json", "no objects"]);
     let g = dir.join("nomesh.gltf");
-    std::fs::write(&g, r#"{"asset":{"version":"2.0"},"scene":0,"scenes":[{"nodes":[0]}],"nodes":[{}]}"#).unwrap();
+    std::fs::write(
+        &g,
+        r#"{"asset":{"version":"2.0"},"scene":0,"scenes":[{"nodes":[0]}],"nodes":[{}]}"#,
+    )
+    .unwrap();
     expect_bad(&dir, &g, &job_json(""), &["nomesh.gltf", "no objects"]);
 }
 
@@ -92,13 +100,29 @@ fn empty_scenes() {
 fn bad_jobs_name_the_field() {
     let dir = tmp("badjob");
     let scene = dir.join("tri.glb");
-    std::fs::write(&scene, triangle_glb([0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, 0.0])).unwrap();
+    std::fs::write(
+        &scene,
+        triangle_glb([0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, 0.0]),
+    )
+    .unwrap();
     let cases: [(String, &[&str]); 6] = [
-        (r#"{"view_space":{"min":[10,1.5,0],"max":[0,2,50]}}"#.into(), &["job.json", "view_space", "inverted"]),
-        (job_json(r#","target_frame_time_ms":-5"#), &["job.json", "target_frame_time_ms"]),
+        (
+            r#"{"view_space":{"min":[10,1.5,0],"max":[0,2,50]}}"#.into(),
+            &["job.json", "view_space", "inverted"],
+        ),
+        (
+            job_json(r#","target_frame_time_ms":-5"#),
+            &["job.json", "target_frame_time_ms"],
+        ),
         (job_json(r#","colour":"red""#), &["job.json", "colour"]),
-        (r#"{"view_space":{"min":[1,1,1],"max":[1,1,1]}}"#.into(), &["job.json", "view_space", "zero size"]),
-        (job_json(r#","camera":{"resolution":[0,512]}"#), &["job.json", "camera.resolution"]),
+        (
+            r#"{"view_space":{"min":[1,1,1],"max":[1,1,1]}}"#.into(),
+            &["job.json", "view_space", "zero size"],
+        ),
+        (
+            job_json(r#","camera":{"resolution":[0,512]}"#),
+            &["job.json", "camera.resolution"],
+        ),
         ("{not json".into(), &["job.json"]),
     ];
     for (job, needles) in cases {
@@ -113,7 +137,11 @@ fn missing_files_and_bad_arguments() {
     std::fs::write(&job, job_json("")).unwrap();
     let o = run(&["place", "/nonexistent/scene.glb", "--job", s(&job)]);
     assert_eq!(code(&o), 2);
-    assert!(stderr(&o).contains("/nonexistent/scene.glb"), "{}", stderr(&o));
+    assert!(
+        stderr(&o).contains("/nonexistent/scene.glb"),
+        "{}",
+        stderr(&o)
+    );
     let o = run(&["gen-city", "--scale", "-1", "-o", s(&dir.join("c.glb"))]);
     assert_eq!(code(&o), 2);
     assert!(stderr(&o).contains("scale"), "{}", stderr(&o));
@@ -126,7 +154,11 @@ fn missing_files_and_bad_arguments() {
 fn placement_of_another_scene_is_rejected() {
     let dir = tmp("mismatch");
     let scene = dir.join("tri.glb");
-    std::fs::write(&scene, triangle_glb([0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, 0.0])).unwrap();
+    std::fs::write(
+        &scene,
+        triangle_glb([0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, 0.0]),
+    )
+    .unwrap();
     let job = dir.join("job.json");
     std::fs::write(&job, job_json("")).unwrap();
     let placement = dir.join("p.json");
@@ -137,7 +169,16 @@ fn placement_of_another_scene_is_rejected() {
            "view_cell":{"box":{"min":[0,0,0],"max":[1,1,1]}},"layers":1,"resolution":4,"memory_bytes":1,"time_ms":0}],"cpvs":[]}"#,
     )
     .unwrap();
-    let o = run(&["evaluate", s(&scene), "--job", s(&job), "--placement", s(&placement), "--views", "10"]);
+    let o = run(&[
+        "evaluate",
+        s(&scene),
+        "--job",
+        s(&job),
+        "--placement",
+        s(&placement),
+        "--views",
+        "10",
+    ]);
     assert_eq!(code(&o), 2, "{}", stderr(&o));
     assert!(stderr(&o).contains("object id 42"), "{}", stderr(&o));
 }

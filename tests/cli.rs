@@ -12,12 +12,24 @@ fn place_and_evaluate_small_city() {
     let city = city("0.1");
     let out = dir.join("placement.json");
     let stats = dir.join("stats.json");
-    let o = run(&["place", s(&city), "--job", s(&small_job()), "-o", s(&out), "--stats", s(&stats)]);
+    let o = run(&[
+        "place",
+        s(&city),
+        "--job",
+        s(&small_job()),
+        "-o",
+        s(&out),
+        "--stats",
+        s(&stats),
+    ]);
     let c = code(&o);
     assert!(c == 0 || c == 3, "exit {c}: {}", stderr(&o));
     let p = read_json(&out);
     let sum = &p["summary"];
-    assert!(sum["cpvs"].as_u64().unwrap() > 0, "the small job must have problem views: {sum}");
+    assert!(
+        sum["cpvs"].as_u64().unwrap() > 0,
+        "the small job must have problem views: {sum}"
+    );
     assert!(sum["impostors"].as_u64().unwrap() > 0);
     assert_eq!(c == 0, sum["unsolved_cpvs"].as_u64().unwrap() == 0);
     let st = read_json(&stats);
@@ -25,7 +37,16 @@ fn place_and_evaluate_small_city() {
 
     let eval = dir.join("eval.json");
     let o = run(&[
-        "evaluate", s(&city), "--job", s(&small_job()), "--placement", s(&out), "-o", s(&eval), "--views", "4000",
+        "evaluate",
+        s(&city),
+        "--job",
+        s(&small_job()),
+        "--placement",
+        s(&out),
+        "-o",
+        s(&eval),
+        "--views",
+        "4000",
     ]);
     assert_eq!(code(&o), 0, "{}", stderr(&o));
     let e = read_json(&eval);
@@ -44,7 +65,16 @@ fn same_bytes_for_any_thread_count() {
     let mut outputs = Vec::new();
     for t in ["1", "2", "4"] {
         let out = dir.join(format!("p{t}.json"));
-        let o = run(&["place", s(&city), "--job", s(&small_job()), "-o", s(&out), "--threads", t]);
+        let o = run(&[
+            "place",
+            s(&city),
+            "--job",
+            s(&small_job()),
+            "-o",
+            s(&out),
+            "--threads",
+            t,
+        ]);
         assert!(matches!(code(&o), 0 | 3), "{}", stderr(&o));
         outputs.push(std::fs::read(&out).unwrap());
     }
@@ -59,12 +89,31 @@ fn prune_never_needs_more_memory() {
     let (a, b) = (dir.join("a.json"), dir.join("b.json"));
     let o = run(&["place", s(&city), "--job", s(&small_job()), "-o", s(&a)]);
     assert!(matches!(code(&o), 0 | 3));
-    let o = run(&["place", s(&city), "--job", s(&small_job()), "-o", s(&b), "--prune"]);
+    let o = run(&[
+        "place",
+        s(&city),
+        "--job",
+        s(&small_job()),
+        "-o",
+        s(&b),
+        "--prune",
+    ]);
     assert!(matches!(code(&o), 0 | 3));
     let (pa, pb) = (read_json(&a), read_json(&b));
     assert!(pb["summary"]["memory_bytes"].as_u64() <= pa["summary"]["memory_bytes"].as_u64());
     let eval = dir.join("e.json");
-    let o = run(&["evaluate", s(&city), "--job", s(&small_job()), "--placement", s(&b), "-o", s(&eval), "--views", "2000"]);
+    let o = run(&[
+        "evaluate",
+        s(&city),
+        "--job",
+        s(&small_job()),
+        "--placement",
+        s(&b),
+        "-o",
+        s(&eval),
+        "--views",
+        "2000",
+    ]);
     assert_eq!(code(&o), 0, "{}", stderr(&o));
     assert_eq!(read_json(&eval)["violations_in_solved"], 0);
 }
@@ -74,7 +123,16 @@ fn summary_scene_places_like_the_glb() {
     let dir = tmp("summary");
     let city = city("0.1");
     let summary = dir.join("city.json");
-    let o = run(&["gen-city", "--scale", "0.1", "--seed", "1", "--summary", "-o", s(&summary)]);
+    let o = run(&[
+        "gen-city",
+        "--scale",
+        "0.1",
+        "--seed",
+        "1",
+        "--summary",
+        "-o",
+        s(&summary),
+    ]);
     assert_eq!(code(&o), 0, "{}", stderr(&o));
     let (a, b) = (dir.join("a.json"), dir.join("b.json"));
     let o1 = run(&["place", s(&city), "--job", s(&small_job()), "-o", s(&a)]);

@@ -29,11 +29,30 @@ fn real_scenes_place_and_pass_the_check() {
         let job = root().join(format!("fixtures/jobs/{name}.json"));
         let p = out.join(format!("{name}.placement.json"));
         let o = run(&["place", s(&scene), "--job", s(&job), "-o", s(&p)]);
-        assert!(matches!(code(&o), 0 | 3), "{name}: exit {}: {}", code(&o), stderr(&o));
+        assert!(
+            matches!(code(&o), 0 | 3),
+            "{name}: exit {}: {}",
+            code(&o),
+            stderr(&o)
+        );
         let placement = read_json(&p);
-        assert!(placement["summary"]["cpvs"].as_u64().unwrap() > 0, "{name}: the job should have problem views");
+        assert!(
+            placement["summary"]["cpvs"].as_u64().unwrap() > 0,
+            "{name}: the job should have problem views"
+        );
         let e = out.join(format!("{name}.eval.json"));
-        let o = run(&["evaluate", s(&scene), "--job", s(&job), "--placement", s(&p), "-o", s(&e), "--views", "2000"]);
+        let o = run(&[
+            "evaluate",
+            s(&scene),
+            "--job",
+            s(&job),
+            "--placement",
+            s(&p),
+            "-o",
+            s(&e),
+            "--views",
+            "2000",
+        ]);
         assert_eq!(code(&o), 0, "{name}: {}", stderr(&o));
         let eval = read_json(&e);
         assert_eq!(eval["violations_in_solved"], 0, "{name}: {eval}");

@@ -9,7 +9,10 @@ fn validator(name: &str) -> jsonschema::Validator {
 
 fn assert_valid(name: &str, v: &serde_json::Value) {
     let val = validator(name);
-    let errors: Vec<String> = val.iter_errors(v).map(|e| format!("{e} at {}", e.instance_path())).collect();
+    let errors: Vec<String> = val
+        .iter_errors(v)
+        .map(|e| format!("{e} at {}", e.instance_path()))
+        .collect();
     assert!(errors.is_empty(), "{name}: {errors:?}");
 }
 
@@ -44,10 +47,35 @@ fn outputs_conform() {
     let dir = tmp("conform");
     let city = city("0.1");
     let job = root().join("fixtures/jobs/city-small.json");
-    let (p, e, st, sum) = (dir.join("p.json"), dir.join("e.json"), dir.join("s.json"), dir.join("sum.json"));
-    let o = run(&["place", s(&city), "--job", s(&job), "-o", s(&p), "--stats", s(&st)]);
+    let (p, e, st, sum) = (
+        dir.join("p.json"),
+        dir.join("e.json"),
+        dir.join("s.json"),
+        dir.join("sum.json"),
+    );
+    let o = run(&[
+        "place",
+        s(&city),
+        "--job",
+        s(&job),
+        "-o",
+        s(&p),
+        "--stats",
+        s(&st),
+    ]);
     assert!(matches!(code(&o), 0 | 3), "{}", stderr(&o));
-    let o = run(&["evaluate", s(&city), "--job", s(&job), "--placement", s(&p), "-o", s(&e), "--views", "500"]);
+    let o = run(&[
+        "evaluate",
+        s(&city),
+        "--job",
+        s(&job),
+        "--placement",
+        s(&p),
+        "-o",
+        s(&e),
+        "--views",
+        "500",
+    ]);
     assert_eq!(code(&o), 0, "{}", stderr(&o));
     let o = run(&["gen-city", "--scale", "0.1", "--summary", "-o", s(&sum)]);
     assert_eq!(code(&o), 0);

@@ -15,13 +15,28 @@ pub fn impostor() -> &'static Path {
     BIN.get_or_init(|| {
         let exe = std::env::current_exe().expect("test executable path");
         // target/<profile>/deps/e2e-<hash>
-        let profile_dir = exe.parent().and_then(Path::parent).expect("target/<profile>");
-        let profile = profile_dir.file_name().unwrap().to_string_lossy().into_owned();
+        let profile_dir = exe
+            .parent()
+            .and_then(Path::parent)
+            .expect("target/<profile>");
+        let profile = profile_dir
+            .file_name()
+            .unwrap()
+            .to_string_lossy()
+            .into_owned();
         let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
         let mut cmd = Command::new(cargo);
-        cmd.current_dir(root()).args(["build", "--quiet", "-p", "optimizer", "--bin", "impostor"]);
+        cmd.current_dir(root())
+            .args(["build", "--quiet", "-p", "optimizer", "--bin", "impostor"]);
         if profile != "debug" {
-            cmd.args(["--profile", if profile == "release" { "release" } else { &profile }]);
+            cmd.args([
+                "--profile",
+                if profile == "release" {
+                    "release"
+                } else {
+                    &profile
+                },
+            ]);
         }
         let status = cmd.status().expect("run cargo build");
         assert!(status.success(), "building the impostor binary failed");
@@ -33,7 +48,10 @@ pub fn impostor() -> &'static Path {
 
 /// Runs `impostor` with `args`.
 pub fn run(args: &[&str]) -> Output {
-    Command::new(impostor()).args(args).output().expect("run impostor")
+    Command::new(impostor())
+        .args(args)
+        .output()
+        .expect("run impostor")
 }
 
 /// Exit code of an output, `-1` when killed.

@@ -231,7 +231,8 @@ pub fn generate(ctx: &Context, job: &Job, pv: &ProblemViews) -> Candidates {
                     group.iter().any(|&(ci, idx)| {
                         let c = &pv.cpvs[ci as usize];
                         let cur = c.cost;
-                        ctx.model.frame_time(cur - c.node_costs[idx as usize] + imp) < ctx.model.frame_time(cur)
+                        ctx.model.frame_time(cur - c.node_costs[idx as usize] + imp)
+                            < ctx.model.frame_time(cur)
                     })
                 };
                 if shafts && size > 0.0 && dist >= size {
@@ -286,9 +287,25 @@ pub fn generate(ctx: &Context, job: &Job, pv: &ProblemViews) -> Candidates {
             // prefix of the block. Boxes serve exactly their block.
             tuples.sort_unstable_by(|(ka, ga), (kb, gb)| match (ka, kb) {
                 (
-                    Key::Shaft { angle: a1, m: m1, j: j1, k: k1 },
-                    Key::Shaft { angle: a2, m: m2, j: j2, k: k2 },
-                ) => (a1, m1, j1, std::cmp::Reverse(k1), ga).cmp(&(a2, m2, j2, std::cmp::Reverse(k2), gb)),
+                    Key::Shaft {
+                        angle: a1,
+                        m: m1,
+                        j: j1,
+                        k: k1,
+                    },
+                    Key::Shaft {
+                        angle: a2,
+                        m: m2,
+                        j: j2,
+                        k: k2,
+                    },
+                ) => (a1, m1, j1, std::cmp::Reverse(k1), ga).cmp(&(
+                    a2,
+                    m2,
+                    j2,
+                    std::cmp::Reverse(k2),
+                    gb,
+                )),
                 _ => (ka, ga).cmp(&(kb, gb)),
             });
             let mut cands = Vec::new();
@@ -297,9 +314,20 @@ pub fn generate(ctx: &Context, job: &Job, pv: &ProblemViews) -> Candidates {
             while i < tuples.len() {
                 // One block: same (angle, axis) for shafts, same kd for boxes.
                 let same_block = |a: &Key, b: &Key| match (a, b) {
-                    (Key::Shaft { angle: a1, m: m1, j: j1, .. }, Key::Shaft { angle: a2, m: m2, j: j2, .. }) => {
-                        (a1, m1, j1) == (a2, m2, j2)
-                    }
+                    (
+                        Key::Shaft {
+                            angle: a1,
+                            m: m1,
+                            j: j1,
+                            ..
+                        },
+                        Key::Shaft {
+                            angle: a2,
+                            m: m2,
+                            j: j2,
+                            ..
+                        },
+                    ) => (a1, m1, j1) == (a2, m2, j2),
                     _ => a == b,
                 };
                 let mut e = i;

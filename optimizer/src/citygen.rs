@@ -27,7 +27,10 @@ pub struct CityParams {
 
 impl Default for CityParams {
     fn default() -> Self {
-        CityParams { seed: 1, scale: 1.0 }
+        CityParams {
+            seed: 1,
+            scale: 1.0,
+        }
     }
 }
 
@@ -52,7 +55,11 @@ fn sub(a: V3, b: V3) -> V3 {
 }
 
 fn cross(a: V3, b: V3) -> V3 {
-    [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
+    [
+        a[1] * b[2] - a[2] * b[1],
+        a[2] * b[0] - a[0] * b[2],
+        a[0] * b[1] - a[1] * b[0],
+    ]
 }
 
 fn normalize(a: V3) -> V3 {
@@ -69,7 +76,8 @@ impl MeshData {
             self.positions.push(p);
             self.normals.push(n);
         }
-        self.indices.extend([base, base + 1, base + 2, base, base + 2, base + 3]);
+        self.indices
+            .extend([base, base + 1, base + 2, base, base + 2, base + 3]);
     }
 
     fn tri(&mut self, a: V3, b: V3, c: V3) {
@@ -101,7 +109,10 @@ impl MeshData {
             [c[0] + r * a.cos(), y, c[2] - r * a.sin()]
         };
         for s in 0..segments {
-            let (y0, y1) = (c[1] + h * s as f32 / segments as f32, c[1] + h * (s + 1) as f32 / segments as f32);
+            let (y0, y1) = (
+                c[1] + h * s as f32 / segments as f32,
+                c[1] + h * (s + 1) as f32 / segments as f32,
+            );
             for i in 0..sides {
                 self.quad(p(i, y0), p(i + 1, y0), p(i + 1, y1), p(i, y1));
             }
@@ -125,7 +136,12 @@ impl MeshData {
         };
         for ring in 0..rings {
             for i in 0..sides {
-                let (a, b, cc, d) = (p(ring + 1, i), p(ring + 1, i + 1), p(ring, i + 1), p(ring, i));
+                let (a, b, cc, d) = (
+                    p(ring + 1, i),
+                    p(ring + 1, i + 1),
+                    p(ring, i + 1),
+                    p(ring, i),
+                );
                 if ring == 0 {
                     self.tri(a, b, cc);
                 } else if ring + 1 == rings {
@@ -149,6 +165,7 @@ impl MeshData {
 
 /// One facade of a unit building: the plane spanned by `origin + s·right +
 /// t·up` for `s, t ∈ [0, 1]`, windows inset along `-out`.
+#[allow(clippy::too_many_arguments)] // a facade is its frame plus its window grid
 fn facade(m: &mut MeshData, origin: V3, right: V3, up: V3, out: V3, nx: u32, ny: u32, sills: bool) {
     let at = |s: f32, t: f32, depth: f32| {
         [
@@ -165,22 +182,82 @@ fn facade(m: &mut MeshData, origin: V3, right: V3, up: V3, out: V3, nx: u32, ny:
             let (ws, wt) = ((s1 - s0) * 0.25, (t1 - t0) * 0.22);
             let (a0, a1, b0, b1) = (s0 + ws, s1 - ws, t0 + wt, t1 - wt);
             // Wall around the window.
-            m.quad(at(s0, t0, 0.0), at(a0, t0, 0.0), at(a0, t1, 0.0), at(s0, t1, 0.0));
-            m.quad(at(a1, t0, 0.0), at(s1, t0, 0.0), at(s1, t1, 0.0), at(a1, t1, 0.0));
-            m.quad(at(a0, t0, 0.0), at(a1, t0, 0.0), at(a1, b0, 0.0), at(a0, b0, 0.0));
-            m.quad(at(a0, b1, 0.0), at(a1, b1, 0.0), at(a1, t1, 0.0), at(a0, t1, 0.0));
+            m.quad(
+                at(s0, t0, 0.0),
+                at(a0, t0, 0.0),
+                at(a0, t1, 0.0),
+                at(s0, t1, 0.0),
+            );
+            m.quad(
+                at(a1, t0, 0.0),
+                at(s1, t0, 0.0),
+                at(s1, t1, 0.0),
+                at(a1, t1, 0.0),
+            );
+            m.quad(
+                at(a0, t0, 0.0),
+                at(a1, t0, 0.0),
+                at(a1, b0, 0.0),
+                at(a0, b0, 0.0),
+            );
+            m.quad(
+                at(a0, b1, 0.0),
+                at(a1, b1, 0.0),
+                at(a1, t1, 0.0),
+                at(a0, t1, 0.0),
+            );
             // Recessed pane and its reveals.
-            m.quad(at(a0, b0, inset), at(a1, b0, inset), at(a1, b1, inset), at(a0, b1, inset));
-            m.quad(at(a0, b0, 0.0), at(a0, b0, inset), at(a0, b1, inset), at(a0, b1, 0.0));
-            m.quad(at(a1, b0, inset), at(a1, b0, 0.0), at(a1, b1, 0.0), at(a1, b1, inset));
-            m.quad(at(a0, b0, inset), at(a0, b0, 0.0), at(a1, b0, 0.0), at(a1, b0, inset));
-            m.quad(at(a0, b1, 0.0), at(a0, b1, inset), at(a1, b1, inset), at(a1, b1, 0.0));
+            m.quad(
+                at(a0, b0, inset),
+                at(a1, b0, inset),
+                at(a1, b1, inset),
+                at(a0, b1, inset),
+            );
+            m.quad(
+                at(a0, b0, 0.0),
+                at(a0, b0, inset),
+                at(a0, b1, inset),
+                at(a0, b1, 0.0),
+            );
+            m.quad(
+                at(a1, b0, inset),
+                at(a1, b0, 0.0),
+                at(a1, b1, 0.0),
+                at(a1, b1, inset),
+            );
+            m.quad(
+                at(a0, b0, inset),
+                at(a0, b0, 0.0),
+                at(a1, b0, 0.0),
+                at(a1, b0, inset),
+            );
+            m.quad(
+                at(a0, b1, 0.0),
+                at(a0, b1, inset),
+                at(a1, b1, inset),
+                at(a1, b1, 0.0),
+            );
             if sills {
                 // A sill: a thin slab standing out below the window.
                 let h = (t1 - t0) * 0.04;
-                m.quad(at(a0, b0 - h, -0.015), at(a1, b0 - h, -0.015), at(a1, b0, -0.015), at(a0, b0, -0.015));
-                m.quad(at(a0, b0, -0.015), at(a1, b0, -0.015), at(a1, b0, 0.0), at(a0, b0, 0.0));
-                m.quad(at(a0, b0 - h, 0.0), at(a1, b0 - h, 0.0), at(a1, b0 - h, -0.015), at(a0, b0 - h, -0.015));
+                m.quad(
+                    at(a0, b0 - h, -0.015),
+                    at(a1, b0 - h, -0.015),
+                    at(a1, b0, -0.015),
+                    at(a0, b0, -0.015),
+                );
+                m.quad(
+                    at(a0, b0, -0.015),
+                    at(a1, b0, -0.015),
+                    at(a1, b0, 0.0),
+                    at(a0, b0, 0.0),
+                );
+                m.quad(
+                    at(a0, b0 - h, 0.0),
+                    at(a1, b0 - h, 0.0),
+                    at(a1, b0 - h, -0.015),
+                    at(a0, b0 - h, -0.015),
+                );
             }
         }
     }
@@ -190,14 +267,55 @@ fn facade(m: &mut MeshData, origin: V3, right: V3, up: V3, out: V3, nx: u32, ny:
 /// window grid on all four sides, and a roof with a cornice.
 fn building(nx: u32, ny: u32, sills: bool, pitched: bool) -> (MeshData, MeshData) {
     let mut walls = MeshData::default();
-    facade(&mut walls, [0.0, 0.0, 1.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0], nx, ny, sills);
-    facade(&mut walls, [1.0, 0.0, 0.0], [-1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, -1.0], nx, ny, sills);
-    facade(&mut walls, [1.0, 0.0, 1.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0], [1.0, 0.0, 0.0], nx, ny, sills);
-    facade(&mut walls, [0.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, 1.0, 0.0], [-1.0, 0.0, 0.0], nx, ny, sills);
+    facade(
+        &mut walls,
+        [0.0, 0.0, 1.0],
+        [1.0, 0.0, 0.0],
+        [0.0, 1.0, 0.0],
+        [0.0, 0.0, 1.0],
+        nx,
+        ny,
+        sills,
+    );
+    facade(
+        &mut walls,
+        [1.0, 0.0, 0.0],
+        [-1.0, 0.0, 0.0],
+        [0.0, 1.0, 0.0],
+        [0.0, 0.0, -1.0],
+        nx,
+        ny,
+        sills,
+    );
+    facade(
+        &mut walls,
+        [1.0, 0.0, 1.0],
+        [0.0, 0.0, -1.0],
+        [0.0, 1.0, 0.0],
+        [1.0, 0.0, 0.0],
+        nx,
+        ny,
+        sills,
+    );
+    facade(
+        &mut walls,
+        [0.0, 0.0, 0.0],
+        [0.0, 0.0, 1.0],
+        [0.0, 1.0, 0.0],
+        [-1.0, 0.0, 0.0],
+        nx,
+        ny,
+        sills,
+    );
     let mut roof = MeshData::default();
     roof.cuboid([-0.02, 0.97, -0.02], [1.02, 1.0, 1.02]);
     if pitched {
-        let (a, b, c, d) = ([0.0, 1.0, 0.0], [1.0, 1.0, 0.0], [1.0, 1.0, 1.0], [0.0, 1.0, 1.0]);
+        let (a, b, c, d) = (
+            [0.0, 1.0, 0.0],
+            [1.0, 1.0, 0.0],
+            [1.0, 1.0, 1.0],
+            [0.0, 1.0, 1.0],
+        );
         let (r0, r1) = ([0.0, 1.12, 0.5], [1.0, 1.12, 0.5]);
         roof.quad(d, c, r1, r0);
         roof.quad(b, a, r0, r1);
@@ -259,7 +377,16 @@ fn car(rings: u32, sides: u32) -> (MeshData, MeshData, MeshData) {
 fn kiosk() -> (MeshData, MeshData) {
     let mut walls = MeshData::default();
     walls.cuboid([0.0, 0.0, 0.0], [2.5, 2.6, 2.0]);
-    facade(&mut walls, [0.0, 0.3, 2.001], [2.5, 0.0, 0.0], [0.0, 2.0, 0.0], [0.0, 0.0, 1.0], 3, 1, false);
+    facade(
+        &mut walls,
+        [0.0, 0.3, 2.001],
+        [2.5, 0.0, 0.0],
+        [0.0, 2.0, 0.0],
+        [0.0, 0.0, 1.0],
+        3,
+        1,
+        false,
+    );
     let mut roof = MeshData::default();
     roof.cuboid([-0.2, 2.6, -0.2], [2.7, 2.8, 2.2]);
     (walls, roof)
@@ -278,7 +405,9 @@ struct Prototypes {
 }
 
 fn prototypes(b: &mut GlbBuilder, rng: &mut Rng, size: [f64; 2]) -> Result<Prototypes> {
-    let mat = |b: &mut GlbBuilder, name: &str, c: [f32; 3]| b.add_material(&Material::new(name, [c[0], c[1], c[2], 1.0]));
+    let mat = |b: &mut GlbBuilder, name: &str, c: [f32; 3]| {
+        b.add_material(&Material::new(name, [c[0], c[1], c[2], 1.0]))
+    };
     let facade_colours: [[f32; 3]; 6] = [
         [0.86, 0.80, 0.66],
         [0.92, 0.88, 0.78],
@@ -301,11 +430,17 @@ fn prototypes(b: &mut GlbBuilder, rng: &mut Rng, size: [f64; 2]) -> Result<Proto
     let glass = mat(b, "car_glass", [0.15, 0.2, 0.25])?;
     let tyre = mat(b, "tyre", [0.08, 0.08, 0.08])?;
     let asphalt = mat(b, "ground", [0.3, 0.3, 0.3])?;
-    let paints: Vec<u32> = [[0.7, 0.1, 0.1], [0.1, 0.2, 0.6], [0.85, 0.85, 0.85], [0.1, 0.1, 0.1], [0.2, 0.5, 0.3]]
-        .iter()
-        .enumerate()
-        .map(|(i, c)| mat(b, &format!("paint_{i}"), *c))
-        .collect::<Result<_>>()?;
+    let paints: Vec<u32> = [
+        [0.7, 0.1, 0.1],
+        [0.1, 0.2, 0.6],
+        [0.85, 0.85, 0.85],
+        [0.1, 0.1, 0.1],
+        [0.2, 0.5, 0.3],
+    ]
+    .iter()
+    .enumerate()
+    .map(|(i, c)| mat(b, &format!("paint_{i}"), *c))
+    .collect::<Result<_>>()?;
 
     let mut buildings = Vec::new();
     for i in 0..36u32 {
@@ -325,12 +460,24 @@ fn prototypes(b: &mut GlbBuilder, rng: &mut Rng, size: [f64; 2]) -> Result<Proto
     let mut trees = Vec::new();
     for (i, (r, s)) in [(16, 32), (24, 40), (28, 56)].into_iter().enumerate() {
         let (trunk, crown) = tree(r, s);
-        trees.push(b.add_mesh_from(&format!("tree_proto_{i}"), &[(trunk.geometry(), Some(bark)), (crown.geometry(), Some(leaves))])?);
+        trees.push(b.add_mesh_from(
+            &format!("tree_proto_{i}"),
+            &[
+                (trunk.geometry(), Some(bark)),
+                (crown.geometry(), Some(leaves)),
+            ],
+        )?);
     }
     let mut lamps = Vec::new();
     for (i, s) in [10u32, 14].into_iter().enumerate() {
         let (pole, head) = lamp(s);
-        lamps.push(b.add_mesh_from(&format!("lamp_proto_{i}"), &[(pole.geometry(), Some(metal)), (head.geometry(), Some(light))])?);
+        lamps.push(b.add_mesh_from(
+            &format!("lamp_proto_{i}"),
+            &[
+                (pole.geometry(), Some(metal)),
+                (head.geometry(), Some(light)),
+            ],
+        )?);
     }
     let benches = vec![b.add_mesh_from("bench_proto", &[(bench().geometry(), Some(wood))])?];
     let mut cars = Vec::new();
@@ -339,12 +486,22 @@ fn prototypes(b: &mut GlbBuilder, rng: &mut Rng, size: [f64; 2]) -> Result<Proto
             let (body, win, wheels) = car(r, s);
             cars.push(b.add_mesh_from(
                 &format!("car_proto_{i}_{j}"),
-                &[(body.geometry(), Some(paint)), (win.geometry(), Some(glass)), (wheels.geometry(), Some(tyre))],
+                &[
+                    (body.geometry(), Some(paint)),
+                    (win.geometry(), Some(glass)),
+                    (wheels.geometry(), Some(tyre)),
+                ],
             )?);
         }
     }
     let (kw, kr) = kiosk();
-    let kiosks = vec![b.add_mesh_from("kiosk_proto", &[(kw.geometry(), Some(facades[4])), (kr.geometry(), Some(metal))])?];
+    let kiosks = vec![b.add_mesh_from(
+        "kiosk_proto",
+        &[
+            (kw.geometry(), Some(facades[4])),
+            (kr.geometry(), Some(metal)),
+        ],
+    )?];
     let mut bin = MeshData::default();
     bin.cylinder([0.0, 0.0, 0.0], 0.3, 0.9, 12, 2);
     let bins = vec![b.add_mesh_from("bin_proto", &[(bin.geometry(), Some(metal))])?];
@@ -396,15 +553,22 @@ struct Placer<'a> {
 }
 
 impl Placer<'_> {
-    fn put(&mut self, kind: &'static str, mesh: u32, t: [f64; 3], rot: f32, scale: [f32; 3]) -> Result<()> {
+    fn put(
+        &mut self,
+        kind: &'static str,
+        mesh: u32,
+        t: [f64; 3],
+        rot: f32,
+        scale: [f32; 3],
+    ) -> Result<()> {
         let n = self.counter.entry(kind).or_insert(0);
         let name = format!("{kind}_{:04}", *n);
         *n += 1;
-        let id = self.b.add_node(
-            Node::new(name)
-                .with_mesh(mesh)
-                .with_trs([t[0] as f32, t[1] as f32, t[2] as f32], yaw(rot), scale),
-        )?;
+        let id = self.b.add_node(Node::new(name).with_mesh(mesh).with_trs(
+            [t[0] as f32, t[1] as f32, t[2] as f32],
+            yaw(rot),
+            scale,
+        ))?;
         self.roots.push(id);
         Ok(())
     }
@@ -442,9 +606,21 @@ pub fn generate(params: &CityParams) -> Result<Vec<u8>> {
                         if rng.f64() < 0.5 {
                             let s = rng.range(0.8, 1.3) as f32;
                             let t = [x + rng.range(-2.0, 2.0), 0.0, z + rng.range(-2.0, 2.0)];
-                            p.put("tree", pick(&mut rng, &protos.trees), t, rng.range(0.0, 6.28) as f32, [s; 3])?;
+                            p.put(
+                                "tree",
+                                pick(&mut rng, &protos.trees),
+                                t,
+                                rng.range(0.0, std::f64::consts::TAU) as f32,
+                                [s; 3],
+                            )?;
                         } else if rng.f64() < 0.1 {
-                            p.put("bench", protos.benches[0], [x, 0.0, z], rng.range(0.0, 6.28) as f32, [1.0; 3])?;
+                            p.put(
+                                "bench",
+                                protos.benches[0],
+                                [x, 0.0, z],
+                                rng.range(0.0, std::f64::consts::TAU) as f32,
+                                [1.0; 3],
+                            )?;
                         }
                         z += 15.0;
                     }
@@ -456,7 +632,15 @@ pub fn generate(params: &CityParams) -> Result<Vec<u8>> {
             // on the x sides.
             let depth_n = rng.range(12.0, 18.0);
             let depth_s = rng.range(12.0, 18.0);
-            let row = |p: &mut Placer, rng: &mut Rng, start: f64, end: f64, fixed: f64, depth: f64, along_x: bool, front_low: bool| -> Result<()> {
+            let row = |p: &mut Placer,
+                       rng: &mut Rng,
+                       start: f64,
+                       end: f64,
+                       fixed: f64,
+                       depth: f64,
+                       along_x: bool,
+                       front_low: bool|
+             -> Result<()> {
                 let mut s = start;
                 while end - s > 6.0 {
                     let mut w = rng.range(12.0, 30.0);
@@ -464,7 +648,11 @@ pub fn generate(params: &CityParams) -> Result<Vec<u8>> {
                         w = end - s;
                     }
                     let tower = rng.f64() < 0.03;
-                    let h = if tower { rng.range(40.0, 60.0) } else { rng.range(8.0, 35.0) };
+                    let h = if tower {
+                        rng.range(40.0, 60.0)
+                    } else {
+                        rng.range(8.0, 35.0)
+                    };
                     let mesh = pick(rng, &protos.buildings);
                     let (t, scale_v) = if along_x {
                         let z0 = if front_low { fixed } else { fixed - depth };
@@ -497,7 +685,14 @@ pub fn generate(params: &CityParams) -> Result<Vec<u8>> {
 
     // Street objects along both kerbs of every street: sidewalk objects 2.5 m
     // and parked cars 5 m from the block edge, the centre line kept free.
-    let kerb = |p: &mut Placer, rng: &mut Rng, along_x: bool, fixed: f64, dir: f64, len: f64, blocks: &[[f64; 2]]| -> Result<()> {
+    let kerb = |p: &mut Placer,
+                rng: &mut Rng,
+                along_x: bool,
+                fixed: f64,
+                dir: f64,
+                len: f64,
+                blocks: &[[f64; 2]]|
+     -> Result<()> {
         for blk in blocks {
             let mut s = blk[0] + 3.0;
             while s < blk[1] - 3.0 {
@@ -508,9 +703,21 @@ pub fn generate(params: &CityParams) -> Result<Vec<u8>> {
                 let r = rng.f64();
                 if r < 0.22 {
                     let sc = rng.range(0.8, 1.2) as f32;
-                    p.put("tree", pick(rng, &protos.trees), at(side, s), rng.range(0.0, 6.28) as f32, [sc; 3])?;
+                    p.put(
+                        "tree",
+                        pick(rng, &protos.trees),
+                        at(side, s),
+                        rng.range(0.0, std::f64::consts::TAU) as f32,
+                        [sc; 3],
+                    )?;
                 } else if r < 0.37 {
-                    p.put("lamp", pick(rng, &protos.lamps), at(side, s), rot + if dir > 0.0 { 0.0 } else { PI }, [1.0; 3])?;
+                    p.put(
+                        "lamp",
+                        pick(rng, &protos.lamps),
+                        at(side, s),
+                        rot + if dir > 0.0 { 0.0 } else { PI },
+                        [1.0; 3],
+                    )?;
                 } else if r < 0.41 {
                     p.put("bench", protos.benches[0], at(side, s), rot, [1.0; 3])?;
                 } else if r < 0.43 {
@@ -519,7 +726,13 @@ pub fn generate(params: &CityParams) -> Result<Vec<u8>> {
                     p.put("kiosk", protos.kiosks[0], at(side, s), rot, [1.0; 3])?;
                 }
                 if rng.f64() < 0.2 {
-                    p.put("car", pick(rng, &protos.cars), at(park, s + 2.0), rot, [1.0; 3])?;
+                    p.put(
+                        "car",
+                        pick(rng, &protos.cars),
+                        at(park, s + 2.0),
+                        rot,
+                        [1.0; 3],
+                    )?;
                 }
                 s += 6.5;
             }
@@ -553,16 +766,32 @@ mod tests {
 
     #[test]
     fn deterministic_and_seed_dependent() {
-        let a = generate(&CityParams { seed: 3, scale: 0.05 }).unwrap();
-        let b = generate(&CityParams { seed: 3, scale: 0.05 }).unwrap();
-        let c = generate(&CityParams { seed: 4, scale: 0.05 }).unwrap();
+        let a = generate(&CityParams {
+            seed: 3,
+            scale: 0.05,
+        })
+        .unwrap();
+        let b = generate(&CityParams {
+            seed: 3,
+            scale: 0.05,
+        })
+        .unwrap();
+        let c = generate(&CityParams {
+            seed: 4,
+            scale: 0.05,
+        })
+        .unwrap();
         assert_eq!(a, b);
         assert_ne!(a, c);
     }
 
     #[test]
     fn small_city_counts_and_bounds() {
-        let glb = generate(&CityParams { seed: 1, scale: 0.1 }).unwrap();
+        let glb = generate(&CityParams {
+            seed: 1,
+            scale: 0.1,
+        })
+        .unwrap();
         let scene = load_scene_bytes(&glb, "city").unwrap();
         let n = scene.objects.len();
         assert!((350..=900).contains(&n), "{n} objects");
@@ -570,13 +799,18 @@ mod tests {
         assert!((500_000..=2_000_000).contains(&tris), "{tris} triangles");
         let (lo, hi) = scene.bounds();
         let [w, d] = city_size(0.1);
-        assert!(lo.x >= -3.0 && lo.z >= -3.0 && hi.x <= w + 3.0 && hi.z <= d + 3.0, "{lo} {hi}");
+        assert!(
+            lo.x >= -3.0 && lo.z >= -3.0 && hi.x <= w + 3.0 && hi.z <= d + 3.0,
+            "{lo} {hi}"
+        );
     }
 
     #[test]
     fn bad_scale_is_rejected() {
         for s in [0.0, -1.0, f64::NAN, 5.0] {
-            let e = generate(&CityParams { seed: 1, scale: s }).unwrap_err().to_string();
+            let e = generate(&CityParams { seed: 1, scale: s })
+                .unwrap_err()
+                .to_string();
             assert!(e.contains("--scale"), "{e}");
         }
     }
@@ -586,7 +820,11 @@ mod tests {
         let glb = generate(&CityParams::default()).unwrap();
         let scene = load_scene_bytes(&glb, "city").unwrap();
         assert!(scene.objects.len() >= 5000, "{}", scene.objects.len());
-        assert!(scene.total_triangles() >= 8_000_000, "{}", scene.total_triangles());
+        assert!(
+            scene.total_triangles() >= 8_000_000,
+            "{}",
+            scene.total_triangles()
+        );
         assert!(glb.len() < 30 << 20, "{} bytes", glb.len());
     }
 }

@@ -115,7 +115,9 @@ fn prepare(scene: &Scene, job: &Job, placement: &Placement, source: &str) -> Res
             if o >= n_obj {
                 return Err(Error::bad(
                     format!("{what}.objects"),
-                    format!("object id {o} does not exist in the scene ({n_obj} objects): the placement does not match the scene"),
+                    format!(
+                        "object id {o} does not exist in the scene ({n_obj} objects): the placement does not match the scene"
+                    ),
                 ));
             }
             let ob = &scene.objects[o as usize];
@@ -138,7 +140,9 @@ fn prepare(scene: &Scene, job: &Job, placement: &Placement, source: &str) -> Res
                 half_angle: half_angle_deg.to_radians(),
                 min_distance,
             },
-            ViewCellJson::Box { min, max } => ViewCell::Box(Aabb::new(DVec3::from_array(min), DVec3::from_array(max))),
+            ViewCellJson::Box { min, max } => {
+                ViewCell::Box(Aabb::new(DVec3::from_array(min), DVec3::from_array(max)))
+            }
         };
         impostors.push(PreparedImpostor {
             sphere,
@@ -154,17 +158,28 @@ fn prepare(scene: &Scene, job: &Job, placement: &Placement, source: &str) -> Res
     let mut cpv_solved = Vec::with_capacity(placement.cpvs.len());
     for (k, c) in placement.cpvs.iter().enumerate() {
         let what = format!("{source}: cpvs[{k}]");
-        let region = Aabb::new(DVec3::from_array(c.region.min), DVec3::from_array(c.region.max));
+        let region = Aabb::new(
+            DVec3::from_array(c.region.min),
+            DVec3::from_array(c.region.max),
+        );
         let cell = grid
             .cell_of(region.center())
             .ok_or_else(|| Error::bad(&what, "region lies outside the job's view space"))?;
         let expect = grid.cell_box(cell, cell.map(|i| i + 1));
-        if expect.min.distance(region.min) + expect.max.distance(region.max) > 1e-6 * (1.0 + expect.half_diagonal()) {
-            return Err(Error::bad(&what, "region is not a cell of the job's view space grid: the placement does not match the job"));
+        if expect.min.distance(region.min) + expect.max.distance(region.max)
+            > 1e-6 * (1.0 + expect.half_diagonal())
+        {
+            return Err(Error::bad(
+                &what,
+                "region is not a cell of the job's view space grid: the placement does not match the job",
+            ));
         }
         let d = &c.directions;
         if d.face > 5 {
-            return Err(Error::bad(format!("{what}.directions.face"), format!("{} is not in 0..6", d.face)));
+            return Err(Error::bad(
+                format!("{what}.directions.face"),
+                format!("{} is not in 0..6", d.face),
+            ));
         }
         let mid = |[a, b]: [f64; 2]| ((a.atan() + b.atan()) * 0.5).tan();
         let vdi = Vdi::containing(face_direction(d.face, mid(d.u), mid(d.v)), level);
@@ -179,17 +194,22 @@ fn prepare(scene: &Scene, job: &Job, placement: &Placement, source: &str) -> Res
         }
         let mut replaced = Vec::new();
         for &i in &c.impostors {
-            let imp = placement
-                .impostors
-                .get(i as usize)
-                .ok_or_else(|| Error::bad(format!("{what}.impostors"), format!("impostor {i} does not exist")))?;
+            let imp = placement.impostors.get(i as usize).ok_or_else(|| {
+                Error::bad(
+                    format!("{what}.impostors"),
+                    format!("impostor {i} does not exist"),
+                )
+            })?;
             replaced.extend_from_slice(&imp.objects);
         }
         replaced.sort_unstable();
         let before = replaced.len();
         replaced.dedup();
         if replaced.len() != before {
-            return Err(Error::bad(format!("{what}.impostors"), "two impostors represent the same object"));
+            return Err(Error::bad(
+                format!("{what}.impostors"),
+                "two impostors represent the same object",
+            ));
         }
         cpv_replaced.push(replaced);
         cpv_impostors.push(c.impostors.clone());
@@ -232,11 +252,18 @@ fn view_time(
             None => {
                 for &o in h.objects(n) {
                     let s = &h.object_spheres[o as usize];
-                    if replaced.binary_search(&o).is_ok() || !f.intersects_sphere(s.center, s.radius) {
+                    if replaced.binary_search(&o).is_ok()
+                        || !f.intersects_sphere(s.center, s.radius)
+                    {
                         continue;
                     }
                     let ob = &scene.objects[o as usize];
-                    cost += model.geometry(ob.draw_calls, ob.triangles, s.radius, eye.distance(s.center));
+                    cost += model.geometry(
+                        ob.draw_calls,
+                        ob.triangles,
+                        s.radius,
+                        eye.distance(s.center),
+                    );
                 }
             }
         }
@@ -253,9 +280,18 @@ fn view_time(
 
 /// Evaluates `placement` for `job` over `scene`. `source` names the placement
 /// file in errors.
-pub fn evaluate(scene: &Scene, job: &Job, placement: &Placement, opts: &EvalOptions, source: &str) -> Result<Evaluation> {
+pub fn evaluate(
+    scene: &Scene,
+    job: &Job,
+    placement: &Placement,
+    opts: &EvalOptions,
+    source: &str,
+) -> Result<Evaluation> {
     if opts.views == 0 || opts.views > 100_000_000 {
-        return Err(Error::bad("--views", format!("{} must be between 1 and 100000000", opts.views)));
+        return Err(Error::bad(
+            "--views",
+            format!("{} must be between 1 and 100000000", opts.views),
+        ));
     }
     let prepared = prepare(scene, job, placement, source)?;
     let h = Hierarchy::build(scene);
@@ -273,11 +309,20 @@ pub fn evaluate(scene: &Scene, job: &Job, placement: &Placement, opts: &EvalOpti
             let eye = rng.in_box(lo, hi);
             let dir = rng.direction_in_pitch(pitch[0], pitch[1]);
             let f = ViewFrustum::new(eye, dir, job.camera.fov_deg, aspect);
-            let cell = prepared.grid.cell_of(eye).expect("sampled inside the view space");
+            let cell = prepared
+                .grid
+                .cell_of(eye)
+                .expect("sampled inside the view space");
             let vdi = Vdi::containing(dir, prepared.level);
-            let cpv = prepared.lookup.get(&(prepared.grid.linear(cell), vdi)).copied();
+            let cpv = prepared
+                .lookup
+                .get(&(prepared.grid.linear(cell), vdi))
+                .copied();
             let (replaced, imps): (&[u32], &[u32]) = match cpv {
-                Some(c) => (&prepared.cpv_replaced[c as usize], &prepared.cpv_impostors[c as usize]),
+                Some(c) => (
+                    &prepared.cpv_replaced[c as usize],
+                    &prepared.cpv_impostors[c as usize],
+                ),
                 None => (&[], &[]),
             };
             let outside = imps
@@ -292,7 +337,11 @@ pub fn evaluate(scene: &Scene, job: &Job, placement: &Placement, opts: &EvalOpti
     let pct = |p: f64| times[((times.len() - 1) as f64 * p).round() as usize];
     let over = |t: f64| t > t_max * (1.0 + 1e-12);
     let solved = |c: u32| c == u32::MAX || prepared.cpv_solved[c as usize];
-    let in_solved: Vec<f64> = samples.iter().filter(|s| solved(s.1)).map(|s| s.0).collect();
+    let in_solved: Vec<f64> = samples
+        .iter()
+        .filter(|s| solved(s.1))
+        .map(|s| s.0)
+        .collect();
     let within: Vec<f64> = times.iter().copied().filter(|&t| !over(t)).collect();
     Ok(Evaluation {
         views: opts.views,

@@ -136,7 +136,7 @@ fn boundary(level: u8, k: u32) -> f64 {
 /// The direction (not normalised) with face coordinates `(u, v)` on `face`.
 pub fn face_direction(face: u8, u: f64, v: f64) -> DVec3 {
     let axis = face / 2;
-    let s = if face % 2 == 0 { 1.0 } else { -1.0 };
+    let s = if face.is_multiple_of(2) { 1.0 } else { -1.0 };
     match axis {
         0 => DVec3::new(s, u, v),
         1 => DVec3::new(u, s, v),
@@ -204,12 +204,18 @@ impl Vdi {
 
     /// `[u_lo, u_hi]`.
     pub fn u_range(&self) -> [f64; 2] {
-        [boundary(self.level, self.iu), boundary(self.level, self.iu + 1)]
+        [
+            boundary(self.level, self.iu),
+            boundary(self.level, self.iu + 1),
+        ]
     }
 
     /// `[v_lo, v_hi]`.
     pub fn v_range(&self) -> [f64; 2] {
-        [boundary(self.level, self.iv), boundary(self.level, self.iv + 1)]
+        [
+            boundary(self.level, self.iv),
+            boundary(self.level, self.iv + 1),
+        ]
     }
 
     /// The four children of the quadtree.
@@ -259,18 +265,39 @@ impl Vdi {
     pub fn elevation_range(&self) -> [f64; 2] {
         let [u0, u1] = self.u_range();
         let [v0, v1] = self.v_range();
-        let closest0 = |[a, b]: [f64; 2]| if a <= 0.0 && b >= 0.0 { 0.0 } else { a.abs().min(b.abs()) };
+        let closest0 = |[a, b]: [f64; 2]| {
+            if a <= 0.0 && b >= 0.0 {
+                0.0
+            } else {
+                a.abs().min(b.abs())
+            }
+        };
         let farthest = |[a, b]: [f64; 2]| a.abs().max(b.abs());
         let axis = self.face / 2;
-        let positive = self.face % 2 == 0;
+        let positive = self.face.is_multiple_of(2);
         match axis {
             // Side faces: y is the u (x faces) or v (z faces) coordinate.
             0 | 2 => {
-                let (y, other) = if axis == 0 { ([u0, u1], [v0, v1]) } else { ([v0, v1], [u0, u1]) };
+                let (y, other) = if axis == 0 {
+                    ([u0, u1], [v0, v1])
+                } else {
+                    ([v0, v1], [u0, u1])
+                };
                 let elev = |y: f64| {
-                    let den = if y >= 0.0 { closest0(other) } else { farthest(other) };
-                    let den_hi = if y >= 0.0 { farthest(other) } else { closest0(other) };
-                    (y.atan2((1.0 + den * den).sqrt()), y.atan2((1.0 + den_hi * den_hi).sqrt()))
+                    let den = if y >= 0.0 {
+                        closest0(other)
+                    } else {
+                        farthest(other)
+                    };
+                    let den_hi = if y >= 0.0 {
+                        farthest(other)
+                    } else {
+                        closest0(other)
+                    };
+                    (
+                        y.atan2((1.0 + den * den).sqrt()),
+                        y.atan2((1.0 + den_hi * den_hi).sqrt()),
+                    )
                 };
                 let (hi, _) = elev(y[1]);
                 let (_, lo) = elev(y[0]);
@@ -512,7 +539,10 @@ mod tests {
             assert!(rho < 11.25f64.to_radians());
             let [lo, hi] = leaf.elevation_range();
             let e = (d.y / d.length()).asin();
-            assert!(e >= lo - 1e-12 && e <= hi + 1e-12, "{e} not in [{lo}, {hi}] for {leaf:?}");
+            assert!(
+                e >= lo - 1e-12 && e <= hi + 1e-12,
+                "{e} not in [{lo}, {hi}] for {leaf:?}"
+            );
         }
     }
 
@@ -546,7 +576,10 @@ mod tests {
                 }
             }
             assert!(d <= best + 1e-9, "exact {d} > sampled {best}");
-            assert!(best - d < 0.2 + 0.02 * best, "exact {d} far below sampled {best}");
+            assert!(
+                best - d < 0.2 + 0.02 * best,
+                "exact {d} far below sampled {best}"
+            );
         }
     }
 
@@ -570,6 +603,9 @@ mod tests {
         // r = 1 at d = 10 with f = 100 px: π·10⁴/99.
         let a = projected_area_px(1.0, 10.0, 100.0, 1e9);
         assert!((a - std::f64::consts::PI * 1e4 / 99.0).abs() < 1e-9);
-        assert_eq!(projected_area_px(1.0, 0.5, 100.0, 512.0 * 512.0), 512.0 * 512.0);
+        assert_eq!(
+            projected_area_px(1.0, 0.5, 100.0, 512.0 * 512.0),
+            512.0 * 512.0
+        );
     }
 }

@@ -338,7 +338,7 @@ impl GlbBuilder {
         debug_assert_eq!(self.bin.len() % 4, 0);
         let offset = self.bin.len();
         self.bin.extend_from_slice(bytes);
-        while self.bin.len() % 4 != 0 {
+        while !self.bin.len().is_multiple_of(4) {
             self.bin.push(0);
         }
         let mut view = Map::new();
@@ -425,7 +425,7 @@ impl GlbBuilder {
             }
         }
         let indices = geometry.indices;
-        if indices.is_empty() || indices.len() % 3 != 0 {
+        if indices.is_empty() || !indices.len().is_multiple_of(3) {
             return Err(bad(
                 "geometry",
                 format!(
@@ -881,7 +881,7 @@ impl GlbBuilder {
     /// limited to 3 GiB by the `add_*` methods).
     pub fn finish(self) -> Vec<u8> {
         let mut json = serde_json::to_vec(&self.json()).expect("JSON values always serialize");
-        while json.len() % 4 != 0 {
+        while !json.len().is_multiple_of(4) {
             json.push(b' ');
         }
         // The buffer is kept padded to 4 bytes by `push_view`.
@@ -919,7 +919,9 @@ mod tests {
         0x00, 0x00, 0x49, 0x45, 0x4E, 0x44, 0xAE, 0x42, 0x60, 0x82,
     ];
 
-    fn triangle() -> (Vec<[f32; 3]>, Vec<[f32; 3]>, Vec<[f32; 2]>, Vec<u32>) {
+    type TriangleData = (Vec<[f32; 3]>, Vec<[f32; 3]>, Vec<[f32; 2]>, Vec<u32>);
+
+    fn triangle() -> TriangleData {
         (
             vec![[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.1]],
             vec![[0.0, 0.0, 1.0]; 3],

@@ -42,7 +42,9 @@ pub struct Selection {
 impl Selection {
     /// Candidate ids of the final impostors, ascending.
     pub fn impostors(&self) -> Vec<u32> {
-        (0..self.uses.len() as u32).filter(|&i| self.uses[i as usize] > 0).collect()
+        (0..self.uses.len() as u32)
+            .filter(|&i| self.uses[i as usize] > 0)
+            .collect()
     }
 }
 
@@ -76,12 +78,19 @@ struct State<'a> {
     pv: &'a ProblemViews,
     cands: &'a [Candidate],
     all: &'a Candidates,
-    /// Per CPV, per listed cluster: the cost of its current representation
-    /// (its objects, with descendant impostors swapped in).
-    rep: Vec<Vec<Cost>>,
-    /// Per CPV, per listed cluster: represented by an impostor of itself or
-    /// of an ancestor.
-    covered: Vec<Vec<bool>>,
+    /// Start of each CPV's entries in the flat per-(CPV, listed cluster)
+    /// arrays below.
+    offsets: Vec<u32>,
+    /// Per (CPV, listed cluster): the cost of the cluster's current
+    /// representation (its objects, with descendant impostors swapped in).
+    rep: Vec<Cost>,
+    /// Per (CPV, listed cluster): represented by an impostor of itself or of
+    /// an ancestor.
+    covered: Vec<bool>,
+    /// Per kd node (cell): how many of its CPVs are still above `t_max`. A
+    /// solved CPV adds nothing to any score, so cells without unsolved CPVs
+    /// are skipped when scoring.
+    unsolved_in_cell: Vec<u32>,
     sel: Selection,
 }
 
@@ -99,8 +108,28 @@ impl<'a> State<'a> {
             pv,
             cands: &cands.list,
             all: cands,
-            rep: pv.cpvs.iter().map(|c| c.node_costs.clone()).collect(),
-            covered: pv.cpvs.iter().map(|c| vec![false; c.node_ids.len()]).collect(),
+            offsets: pv
+                .cpvs
+                .iter()
+                .scan(0u32, |acc, c| {
+                    let o = *acc;
+                    *acc += c.node_ids.len() as u32;
+                    Some(o)
+                })
+                .collect(),
+            rep: pv
+                .cpvs
+                .iter()
+                .flat_map(|c| c.node_costs.iter().copied())
+                .collect(),
+            covered: vec![false; pv.cpvs.iter().map(|c| c.node_ids.len()).sum()],
+            unsolved_in_cell: {
+                let mut v = vec![0u32; pv.kd.len()];
+                for c in &pv.cpvs {
+                    v[c.kd as usize] += u32::from(c.time > ctx.t_max);
+                }
+                v
+            },
             sel: Selection {
                 cpv_impostors: vec![Vec::new(); pv.cpvs.len()],
                 cpv_cost: pv.cpvs.iter().map(|c| c.cost).collect(),
@@ -116,20 +145,22 @@ impl<'a> State<'a> {
     fn impostor_cost(&self, j: u32, cpv: &Cpv) -> Cost {
         let cand = &self.cands[j as usize];
         let s = self.ctx.hierarchy.nodes[cand.node as usize].sphere;
-        self.ctx
-            .model
-            .impostor(cand.spec.layers, s.radius, cpv.region.distance_to_point(s.center))
+        self.ctx.model.impostor(
+            cand.spec.layers,
+            s.radius,
+            cpv.region.distance_to_point(s.center),
+        )
     }
 
-    fn effect(&self, i: u32, c: u32, idx: u32) -> Option<Effect> {
-        let cpv = &self.pv.cpvs[c as usize];
-        let idx = idx as usize;
-        if self.covered[c as usize][idx] {
+    /// The effect on CPV `c` of replacing the cluster listed at `idx` there by
+    /// an impostor costing `imp`.
+    fn effect(&self, c: u32, idx: u32, imp: Cost) -> Option<Effect> {
+        let flat = (self.offsets[c as usize] + idx) as usize;
+        if self.covered[flat] {
             return None;
         }
-        let rep = self.rep[c as usize][idx];
         let cur = self.sel.cpv_cost[c as usize];
-        let new_cost = cur - rep + self.impostor_cost(i, cpv);
+        let new_cost = cur - self.rep[flat] + imp;
         let m = &self.ctx.model;
         let (t_cur, t_new) = (m.frame_time(cur), m.frame_time(new_cost));
         Some(Effect {
@@ -139,23 +170,51 @@ impl<'a> State<'a> {
         })
     }
 
+    /// Calls `f(cpv, idx, effect)` for every CPV candidate `i` may serve; with
+    /// `unsolved_only`, only for CPVs still above `t_max`.
+    fn for_each_effect(&self, i: u32, unsolved_only: bool, mut f: impl FnMut(u32, u32, Effect)) {
+        let all = self.all;
+        let cand = &self.cands[i as usize];
+        let s = self.ctx.hierarchy.nodes[cand.node as usize].sphere;
+        let (start, n) = cand.served;
+        for &g in &all.served[start as usize..(start + n) as usize] {
+            let (a, b) = all.groups[g as usize];
+            let pairs = &all.pairs[a as usize..b as usize];
+            let first = &self.pv.cpvs[pairs[0].0 as usize];
+            if unsolved_only && self.unsolved_in_cell[first.kd as usize] == 0 {
+                continue;
+            }
+            // All CPVs of a group share their region, hence the impostor's cost.
+            let region = &first.region;
+            let imp = self.ctx.model.impostor(
+                cand.spec.layers,
+                s.radius,
+                region.distance_to_point(s.center),
+            );
+            for &(c, idx) in pairs {
+                if unsolved_only
+                    && self.ctx.model.frame_time(self.sel.cpv_cost[c as usize]) <= self.ctx.t_max
+                {
+                    continue;
+                }
+                if let Some(e) = self.effect(c, idx, imp) {
+                    f(c, idx, e);
+                }
+            }
+        }
+    }
+
     fn score(&self, i: u32) -> f64 {
         let mut sum = 0.0;
-        self.all.for_each_served(i, |c, idx| {
-            if let Some(e) = self.effect(i, c, idx) {
-                sum += e.delta;
-            }
-        });
+        self.for_each_effect(i, true, |_, _, e| sum += e.delta);
         sum / self.cands[i as usize].spec.memory_bytes.max(1) as f64
     }
 
     fn accept(&mut self, i: u32) {
         let mut changes: Vec<(u32, u32, Cost)> = Vec::new();
-        self.all.for_each_served(i, |c, idx| {
-            if let Some(e) = self.effect(i, c, idx) {
-                if e.accelerates {
-                    changes.push((c, idx, e.new_cost));
-                }
+        self.for_each_effect(i, false, |c, idx, e| {
+            if e.accelerates {
+                changes.push((c, idx, e.new_cost));
             }
         });
         let h = self.ctx.hierarchy;
@@ -165,19 +224,20 @@ impl<'a> State<'a> {
             let cu = c as usize;
             let cpv = &self.pv.cpvs[cu];
             let idx = idx as usize;
-            let saving = self.rep[cu][idx] - self.impostor_cost(i, cpv);
+            let off = self.offsets[cu] as usize;
+            let saving = self.rep[off + idx] - self.impostor_cost(i, cpv);
             // The cluster and every listed descendant are now represented.
             for k in idx..cpv.node_ids.len() {
                 if cpv.node_ids[k] >= end {
                     break;
                 }
-                self.covered[cu][k] = true;
+                self.covered[off + k] = true;
             }
             // Every listed ancestor's representation got cheaper.
             let mut a = h.nodes[node as usize].parent;
             while a != u32::MAX {
                 if let Some(ai) = cpv.node_index(a) {
-                    self.rep[cu][ai] = self.rep[cu][ai] - saving;
+                    self.rep[off + ai] = self.rep[off + ai] - saving;
                 }
                 a = h.nodes[a as usize].parent;
             }
@@ -193,6 +253,12 @@ impl<'a> State<'a> {
             });
             list.push(i);
             self.sel.uses[i as usize] += 1;
+            let m = &self.ctx.model;
+            if m.frame_time(self.sel.cpv_cost[cu]) > self.ctx.t_max
+                && m.frame_time(cost) <= self.ctx.t_max
+            {
+                self.unsolved_in_cell[cpv.kd as usize] -= 1;
+            }
             self.sel.cpv_cost[cu] = cost;
         }
         self.sel.accepted += 1;
@@ -217,7 +283,15 @@ pub fn select_lazy(ctx: &Context, pv: &ProblemViews, cands: &Candidates) -> Sele
         .into_iter()
         .enumerate()
         .filter(|&(_, s)| s > 0.0)
-        .map(|(i, score)| (Key { score, id: i as u32 }, 0))
+        .map(|(i, score)| {
+            (
+                Key {
+                    score,
+                    id: i as u32,
+                },
+                0,
+            )
+        })
         .collect();
     let batch = 2 * rayon::current_num_threads().max(1);
     let mut version = 0u64;
@@ -288,7 +362,12 @@ pub fn prune(ctx: &Context, pv: &ProblemViews, cands: &Candidates, sel: &mut Sel
     let mut st = State::new(ctx, pv, cands);
     st.sel = sel.clone();
     let mut order = st.sel.impostors();
-    order.sort_by_key(|&i| (std::cmp::Reverse(cands.list[i as usize].spec.memory_bytes), i));
+    order.sort_by_key(|&i| {
+        (
+            std::cmp::Reverse(cands.list[i as usize].spec.memory_bytes),
+            i,
+        )
+    });
     let mut users: Vec<Vec<u32>> = vec![Vec::new(); cands.list.len()];
     for (c, list) in sel.cpv_impostors.iter().enumerate() {
         for &i in list {

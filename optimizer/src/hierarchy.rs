@@ -135,7 +135,10 @@ impl Hierarchy {
                 None => {
                     let (s, e) = nodes[id].objects;
                     let objs = &order[s as usize..e as usize];
-                    let mut aabb = Aabb::new(scene.objects[objs[0] as usize].min, scene.objects[objs[0] as usize].max);
+                    let mut aabb = Aabb::new(
+                        scene.objects[objs[0] as usize].min,
+                        scene.objects[objs[0] as usize].max,
+                    );
                     let mut sphere = object_spheres[objs[0] as usize];
                     let (mut calls, mut tris) = (0u64, 0u64);
                     for &o in objs {
@@ -202,12 +205,16 @@ impl Hierarchy {
         for (id, n) in self.nodes.iter().enumerate() {
             for &o in self.objects(id as u32) {
                 let s = &self.object_spheres[o as usize];
-                if s.center.distance(n.sphere.center) + s.radius > n.sphere.radius * (1.0 + 1e-9) + 1e-9 {
+                if s.center.distance(n.sphere.center) + s.radius
+                    > n.sphere.radius * (1.0 + 1e-9) + 1e-9
+                {
                     return Err(format!("object {o} sphere outside node {id} sphere"));
                 }
             }
             if let Some([l, r]) = n.children {
-                if self.nodes[l as usize].parent != id as u32 || self.nodes[r as usize].parent != id as u32 {
+                if self.nodes[l as usize].parent != id as u32
+                    || self.nodes[r as usize].parent != id as u32
+                {
                     return Err(format!("node {id}: broken parent links"));
                 }
                 if !(self.is_descendant(l, id as u32) && self.is_descendant(r, id as u32)) {
@@ -254,7 +261,11 @@ mod tests {
         assert_eq!(h.nodes[0].triangles, scene.total_triangles());
         let calls: u64 = scene.objects.iter().map(|o| u64::from(o.draw_calls)).sum();
         assert_eq!(h.nodes[0].draw_calls, calls);
-        assert!(h.nodes.iter().all(|n| n.children.is_some() || (n.objects.1 - n.objects.0) <= MAX_OBJECTS_PER_LEAF));
+        assert!(
+            h.nodes.iter().all(
+                |n| n.children.is_some() || (n.objects.1 - n.objects.0) <= MAX_OBJECTS_PER_LEAF
+            )
+        );
         // Deterministic.
         let h2 = Hierarchy::build(&scene);
         assert_eq!(h.order, h2.order);

@@ -76,7 +76,8 @@ impl ViewCell {
                 min_distance,
             } => {
                 b.max_distance_to_point(apex) >= min_distance
-                    && Cone::new(apex, axis, half_angle).intersects_sphere(b.center(), b.half_diagonal())
+                    && Cone::new(apex, axis, half_angle)
+                        .intersects_sphere(b.center(), b.half_diagonal())
             }
         }
     }
@@ -181,7 +182,8 @@ impl ImpostorModel {
         if zn <= 0.0 {
             return None;
         }
-        let n = (cell.half_diagonal() * (1.0 / zn - 1.0 / zf) / (2.0 * self.eps * self.theta)).ceil();
+        let n =
+            (cell.half_diagonal() * (1.0 / zn - 1.0 / zf) / (2.0 * self.eps * self.theta)).ceil();
         self.spec(n, res)
     }
 }
@@ -214,7 +216,10 @@ mod tests {
         let spec = m.shaft(&s, 45f64.to_radians(), 20.0).unwrap();
         assert_eq!(spec.layers, 219);
         assert_eq!(spec.resolution, 1237);
-        assert_eq!(spec.memory_bytes, (219.0f64 * 1237.0 * 1237.0 * 16.0 / 3.0).ceil() as u64);
+        assert_eq!(
+            spec.memory_bytes,
+            (219.0f64 * 1237.0 * 1237.0 * 16.0 / 3.0).ceil() as u64
+        );
         // Too close: the view cell would meet the cluster.
         assert!(m.shaft(&s, 0.1, 10.0).is_none());
         // Resolution floor of 4 texels.
@@ -228,7 +233,10 @@ mod tests {
             center: DVec3::new(100.0, 0.0, 0.0),
             radius: 5.0,
         };
-        let cell = Aabb::new(DVec3::new(-10.0, -10.0, -10.0), DVec3::new(10.0, 10.0, 10.0));
+        let cell = Aabb::new(
+            DVec3::new(-10.0, -10.0, -10.0),
+            DVec3::new(10.0, 10.0, 10.0),
+        );
         // r = √300 = 17.32, z_n = 95, z_f = 105: n = ceil(17.32·(1/95 − 1/105)/(2θ)) = ceil(5.35) = 6.
         // d_min = 90: res = ceil(10/(θ·85)) = ceil(72.71) = 73.
         let spec = m.boxed(&s, &cell).unwrap();

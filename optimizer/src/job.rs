@@ -306,7 +306,10 @@ impl Job {
         let vs = &self.view_space;
         for (name, v) in [("view_space.min", vs.min), ("view_space.max", vs.max)] {
             if v.iter().any(|c| !c.is_finite() || c.abs() > 1e9) {
-                return Err(bad(name, format!("{v:?} is not a finite coordinate (|c| ≤ 1e9)")));
+                return Err(bad(
+                    name,
+                    format!("{v:?} is not a finite coordinate (|c| ≤ 1e9)"),
+                ));
             }
         }
         for axis in 0..3 {
@@ -327,7 +330,12 @@ impl Job {
             ));
         }
         let [lo, hi] = vs.pitch_deg;
-        if !(lo.is_finite() && hi.is_finite() && (-90.0..=90.0).contains(&lo) && (-90.0..=90.0).contains(&hi) && lo <= hi) {
+        if !(lo.is_finite()
+            && hi.is_finite()
+            && (-90.0..=90.0).contains(&lo)
+            && (-90.0..=90.0).contains(&hi)
+            && lo <= hi)
+        {
             return Err(bad(
                 "view_space.pitch_deg",
                 format!("[{lo}, {hi}] must satisfy -90 ≤ lo ≤ hi ≤ 90"),
@@ -335,7 +343,10 @@ impl Job {
         }
         let cam = &self.camera;
         if !(cam.fov_deg.is_finite() && cam.fov_deg > 0.0 && cam.fov_deg < 170.0) {
-            return Err(bad("camera.fov_deg", format!("{} must be in (0, 170)", cam.fov_deg)));
+            return Err(bad(
+                "camera.fov_deg",
+                format!("{} must be in (0, 170)", cam.fov_deg),
+            ));
         }
         let [w, h] = cam.resolution;
         if w == 0 || h == 0 || w > 16384 || h > 16384 {
@@ -346,7 +357,10 @@ impl Job {
         }
         let t = self.target_frame_time_ms;
         if !(t.is_finite() && t > 0.0 && t <= 1e6) {
-            return Err(bad("target_frame_time_ms", format!("{t} must be a positive number of milliseconds")));
+            return Err(bad(
+                "target_frame_time_ms",
+                format!("{t} must be a positive number of milliseconds"),
+            ));
         }
         let e = self.max_error_px;
         if !(e.is_finite() && e > 0.0 && e <= 1e4) {
@@ -360,15 +374,24 @@ impl Job {
             ("cost_model.pixel_ns", c.pixel_ns),
         ] {
             if !(v.is_finite() && (0.0..=1e9).contains(&v)) {
-                return Err(bad(name, format!("{v} must be a finite non-negative number")));
+                return Err(bad(
+                    name,
+                    format!("{v} must be a finite non-negative number"),
+                ));
             }
         }
         if c.combine == Combine::Primitives && c.triangle_ns <= 0.0 {
-            return Err(bad("cost_model.triangle_ns", "must be positive in the primitives mode".into()));
+            return Err(bad(
+                "cost_model.triangle_ns",
+                "must be positive in the primitives mode".into(),
+            ));
         }
         let pv = &self.problem_views;
         if !(pv.cell_size.is_finite() && pv.cell_size > 0.0) {
-            return Err(bad("problem_views.cell_size", format!("{} must be positive", pv.cell_size)));
+            return Err(bad(
+                "problem_views.cell_size",
+                format!("{} must be positive", pv.cell_size),
+            ));
         }
         let cells: f64 = (0..3)
             .map(|a| ((vs.max[a] - vs.min[a]) / pv.cell_size).ceil().max(1.0))
@@ -376,22 +399,37 @@ impl Job {
         if cells > MAX_CELLS {
             return Err(bad(
                 "problem_views.cell_size",
-                format!("{} m makes {cells:.0} cells over the view space (at most {MAX_CELLS:.0}); use larger cells", pv.cell_size),
+                format!(
+                    "{} m makes {cells:.0} cells over the view space (at most {MAX_CELLS:.0}); use larger cells",
+                    pv.cell_size
+                ),
             ));
         }
         if !(pv.min_vdi_deg.is_finite() && (0.5..=90.0).contains(&pv.min_vdi_deg)) {
-            return Err(bad("problem_views.min_vdi_deg", format!("{} must be in [0.5, 90]", pv.min_vdi_deg)));
+            return Err(bad(
+                "problem_views.min_vdi_deg",
+                format!("{} must be in [0.5, 90]", pv.min_vdi_deg),
+            ));
         }
         let cp = &self.candidates;
         if cp.apex_angles_deg.is_empty() && cp.view_cells != ViewCellKind::Boxes {
-            return Err(bad("candidates.apex_angles_deg", "needs at least one angle for shafts".into()));
+            return Err(bad(
+                "candidates.apex_angles_deg",
+                "needs at least one angle for shafts".into(),
+            ));
         }
         if cp.apex_angles_deg.len() > 16 {
-            return Err(bad("candidates.apex_angles_deg", "at most 16 angles".into()));
+            return Err(bad(
+                "candidates.apex_angles_deg",
+                "at most 16 angles".into(),
+            ));
         }
         for &a in &cp.apex_angles_deg {
             if !(a.is_finite() && a > 0.0 && a <= 180.0) {
-                return Err(bad("candidates.apex_angles_deg", format!("{a} must be in (0, 180]")));
+                return Err(bad(
+                    "candidates.apex_angles_deg",
+                    format!("{a} must be in (0, 180]"),
+                ));
             }
         }
         if !(cp.direction_step_deg.is_finite() && (1.0..=90.0).contains(&cp.direction_step_deg)) {
@@ -407,8 +445,12 @@ impl Job {
             ));
         }
         let m = &self.memory;
-        if !(m.bytes_per_texel.is_finite() && m.bytes_per_texel > 0.0 && m.bytes_per_texel <= 64.0) {
-            return Err(bad("memory.bytes_per_texel", format!("{} must be in (0, 64]", m.bytes_per_texel)));
+        if !(m.bytes_per_texel.is_finite() && m.bytes_per_texel > 0.0 && m.bytes_per_texel <= 64.0)
+        {
+            return Err(bad(
+                "memory.bytes_per_texel",
+                format!("{} must be in (0, 64]", m.bytes_per_texel),
+            ));
         }
         if !(4..=16384).contains(&m.max_texture_size) {
             return Err(bad(
@@ -463,13 +505,34 @@ mod tests {
     #[test]
     fn bad_fields_are_named() {
         let cases = [
-            (r#"{"view_space":{"min":[0,0,0],"max":[1,1,1]},"bogus":1}"#, "bogus"),
-            (r#"{"view_space":{"min":[5,0,0],"max":[1,1,1]}}"#, "inverted"),
-            (r#"{"view_space":{"min":[1,1,1],"max":[1,1,1]}}"#, "zero size"),
-            (r#"{"view_space":{"min":[0,0,0],"max":[1,1,1]},"target_frame_time_ms":-3}"#, "target_frame_time_ms"),
-            (r#"{"view_space":{"min":[0,0,0],"max":[1,1,1]},"camera":{"fov_deg":0}}"#, "camera.fov_deg"),
-            (r#"{"view_space":{"min":[0,0,0],"max":[1,1,1],"pitch_deg":[10,-10]}}"#, "pitch_deg"),
-            (r#"{"view_space":{"min":[0,0,0],"max":[1e6,1,1e6]},"problem_views":{"cell_size":1}}"#, "cell_size"),
+            (
+                r#"{"view_space":{"min":[0,0,0],"max":[1,1,1]},"bogus":1}"#,
+                "bogus",
+            ),
+            (
+                r#"{"view_space":{"min":[5,0,0],"max":[1,1,1]}}"#,
+                "inverted",
+            ),
+            (
+                r#"{"view_space":{"min":[1,1,1],"max":[1,1,1]}}"#,
+                "zero size",
+            ),
+            (
+                r#"{"view_space":{"min":[0,0,0],"max":[1,1,1]},"target_frame_time_ms":-3}"#,
+                "target_frame_time_ms",
+            ),
+            (
+                r#"{"view_space":{"min":[0,0,0],"max":[1,1,1]},"camera":{"fov_deg":0}}"#,
+                "camera.fov_deg",
+            ),
+            (
+                r#"{"view_space":{"min":[0,0,0],"max":[1,1,1],"pitch_deg":[10,-10]}}"#,
+                "pitch_deg",
+            ),
+            (
+                r#"{"view_space":{"min":[0,0,0],"max":[1e6,1,1e6]},"problem_views":{"cell_size":1}}"#,
+                "cell_size",
+            ),
             (r#"{"camera":{}}"#, "view_space"),
         ];
         for (json, needle) in cases {

@@ -105,9 +105,18 @@ fn write_output(path: Option<&Path>, bytes: &[u8]) -> Result<()> {
             .write_all(bytes)
             .map_err(|e| Error::io("<stdout>", e)),
         Some(p) => {
-            let dir = p.parent().filter(|d| !d.as_os_str().is_empty()).unwrap_or(Path::new("."));
-            let name = p.file_name().ok_or_else(|| Error::bad(p.display().to_string(), "not a file path"))?;
-            let tmp = dir.join(format!(".{}.tmp{}", name.to_string_lossy(), std::process::id()));
+            let dir = p
+                .parent()
+                .filter(|d| !d.as_os_str().is_empty())
+                .unwrap_or(Path::new("."));
+            let name = p
+                .file_name()
+                .ok_or_else(|| Error::bad(p.display().to_string(), "not a file path"))?;
+            let tmp = dir.join(format!(
+                ".{}.tmp{}",
+                name.to_string_lossy(),
+                std::process::id()
+            ));
             std::fs::write(&tmp, bytes).map_err(|e| Error::io(p, e))?;
             std::fs::rename(&tmp, p).map_err(|e| {
                 let _ = std::fs::remove_file(&tmp);
@@ -125,7 +134,10 @@ fn read_job(path: &Path) -> Result<Job> {
 fn set_threads(threads: Option<usize>) -> Result<()> {
     if let Some(n) = threads {
         if n == 0 || n > 1024 {
-            return Err(Error::bad("--threads", format!("{n} must be between 1 and 1024")));
+            return Err(Error::bad(
+                "--threads",
+                format!("{n} must be between 1 and 1024"),
+            ));
         }
         rayon::ThreadPoolBuilder::new()
             .num_threads(n)
@@ -155,7 +167,15 @@ fn run(cli: Cli) -> Result<ExitCode> {
             set_threads(threads)?;
             let job = read_job(&job)?;
             let scene = gltf_load::load_scene_file(&scene)?;
-            let output = place(&scene, &job, &PlaceOptions { prune, progress: true, verbose });
+            let output = place(
+                &scene,
+                &job,
+                &PlaceOptions {
+                    prune,
+                    progress: true,
+                    verbose,
+                },
+            );
             write_output(out.as_deref(), &json(&output.placement)?)?;
             if let Some(s) = stats {
                 write_output(Some(&s), &json(&output.stats)?)?;
@@ -169,7 +189,11 @@ fn run(cli: Cli) -> Result<ExitCode> {
                 sum.memory_bytes as f64 / 1e6,
                 sum.unsolved_cpvs
             );
-            Ok(if sum.unsolved_cpvs > 0 { ExitCode::from(3) } else { ExitCode::SUCCESS })
+            Ok(if sum.unsolved_cpvs > 0 {
+                ExitCode::from(3)
+            } else {
+                ExitCode::SUCCESS
+            })
         }
         Command::Evaluate {
             scene,
@@ -193,11 +217,13 @@ fn run(cli: Cli) -> Result<ExitCode> {
                 "{} views: max {:.3} ms, p99 {:.3} ms, {} violations ({} in solved)",
                 eval.views, eval.max_ms, eval.p99_ms, eval.violations, eval.violations_in_solved
             );
-            Ok(if eval.violations_in_solved > 0 || eval.impostors_outside_view_cell > 0 {
-                ExitCode::from(4)
-            } else {
-                ExitCode::SUCCESS
-            })
+            Ok(
+                if eval.violations_in_solved > 0 || eval.impostors_outside_view_cell > 0 {
+                    ExitCode::from(4)
+                } else {
+                    ExitCode::SUCCESS
+                },
+            )
         }
         Command::GenCity {
             seed,
@@ -210,7 +236,12 @@ fn run(cli: Cli) -> Result<ExitCode> {
                 let scene = gltf_load::load_scene_bytes(&glb, "generated city")?;
                 write_output(out.as_deref(), &json(&scene.summary())?)?;
             } else {
-                let out = out.ok_or_else(|| Error::bad("gen-city", "-o FILE is required for the GLB (or use --summary)"))?;
+                let out = out.ok_or_else(|| {
+                    Error::bad(
+                        "gen-city",
+                        "-o FILE is required for the GLB (or use --summary)",
+                    )
+                })?;
                 write_output(Some(&out), &glb)?;
             }
             Ok(ExitCode::SUCCESS)

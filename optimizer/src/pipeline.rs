@@ -11,8 +11,8 @@ use crate::hierarchy::Hierarchy;
 use crate::impostor_model::ViewCell;
 use crate::job::Job;
 use crate::placement::{
-    DirectionsJson, PlacedCpv, PlacedImpostor, Placement, RegionJson, SphereJson, StageTime, Stats, Summary,
-    ViewCellJson, peak_rss_bytes,
+    DirectionsJson, PlacedCpv, PlacedImpostor, Placement, RegionJson, SphereJson, StageTime, Stats,
+    Summary, ViewCellJson, peak_rss_bytes,
 };
 use crate::problem_views::{self, Context, ProblemViews};
 use crate::scene::Scene;
@@ -48,7 +48,10 @@ impl Stages {
     fn new(progress: bool, verbose: bool) -> Self {
         let bar = progress.then(|| {
             let b = ProgressBar::new_spinner();
-            b.set_style(ProgressStyle::with_template("{spinner} [{elapsed_precise}] {msg}").expect("valid template"));
+            b.set_style(
+                ProgressStyle::with_template("{spinner} [{elapsed_precise}] {msg}")
+                    .expect("valid template"),
+            );
             b.enable_steady_tick(std::time::Duration::from_millis(120));
             b
         });
@@ -107,7 +110,10 @@ pub fn place(scene: &Scene, job: &Job, opts: &PlaceOptions) -> PlaceOutput {
     let cands = candidates::generate(&ctx, job, &pv);
     st.end("candidates");
 
-    st.begin(&format!("greedy selection over {} candidates", cands.list.len()));
+    st.begin(&format!(
+        "greedy selection over {} candidates",
+        cands.list.len()
+    ));
     let mut sel = greedy::select_lazy(&ctx, &pv, &cands);
     st.end("greedy");
     if opts.prune {
@@ -204,7 +210,10 @@ pub fn build_placement(
         .iter()
         .enumerate()
         .map(|(ci, c)| {
-            let mut imps: Vec<u32> = sel.cpv_impostors[ci].iter().map(|&i| new_id[i as usize]).collect();
+            let mut imps: Vec<u32> = sel.cpv_impostors[ci]
+                .iter()
+                .map(|&i| new_id[i as usize])
+                .collect();
             imps.sort_unstable();
             let final_ms = ctx.model.frame_time(sel.cpv_cost[ci]);
             let solved = final_ms <= job.target_frame_time_ms;
@@ -250,7 +259,10 @@ mod tests {
     fn run(threads: usize, seed: u64) -> Placement {
         let scene = synthetic_city(seed, 5, 5);
         let job = synthetic_job(5, 5);
-        let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .unwrap();
         pool.install(|| place(&scene, &job, &PlaceOptions::default()).placement)
     }
 
@@ -272,7 +284,17 @@ mod tests {
             let p = &out.placement;
             assert!(p.summary.cpvs > 0);
             assert!(p.summary.impostors > 0, "{:?}", p.summary);
-            let eval = evaluate(&scene, &job, p, &EvalOptions { views: 3000, seed: 9 }, "p.json").unwrap();
+            let eval = evaluate(
+                &scene,
+                &job,
+                p,
+                &EvalOptions {
+                    views: 3000,
+                    seed: 9,
+                },
+                "p.json",
+            )
+            .unwrap();
             assert_eq!(eval.violations_in_solved, 0, "{eval:?}");
             assert_eq!(eval.impostors_outside_view_cell, 0);
             if p.summary.unsolved_cpvs == 0 {
@@ -280,7 +302,11 @@ mod tests {
             }
             // Every CPV's impostors are an antichain: no object twice.
             for c in &p.cpvs {
-                let mut objs: Vec<u32> = c.impostors.iter().flat_map(|&i| p.impostors[i as usize].objects.clone()).collect();
+                let mut objs: Vec<u32> = c
+                    .impostors
+                    .iter()
+                    .flat_map(|&i| p.impostors[i as usize].objects.clone())
+                    .collect();
                 let n = objs.len();
                 objs.sort_unstable();
                 objs.dedup();
@@ -316,10 +342,28 @@ mod tests {
         let scene = synthetic_city(2, 5, 5);
         let job = synthetic_job(5, 5);
         let plain = place(&scene, &job, &PlaceOptions::default()).placement;
-        let pruned = place(&scene, &job, &PlaceOptions { prune: true, ..PlaceOptions::default() }).placement;
+        let pruned = place(
+            &scene,
+            &job,
+            &PlaceOptions {
+                prune: true,
+                ..PlaceOptions::default()
+            },
+        )
+        .placement;
         assert!(pruned.summary.memory_bytes <= plain.summary.memory_bytes);
         assert_eq!(pruned.summary.unsolved_cpvs, plain.summary.unsolved_cpvs);
-        let eval = evaluate(&scene, &job, &pruned, &EvalOptions { views: 2000, seed: 1 }, "p.json").unwrap();
+        let eval = evaluate(
+            &scene,
+            &job,
+            &pruned,
+            &EvalOptions {
+                views: 2000,
+                seed: 1,
+            },
+            "p.json",
+        )
+        .unwrap();
         assert_eq!(eval.violations_in_solved, 0);
     }
 }

@@ -51,8 +51,16 @@ impl Grid {
     /// The box of cells `lo..hi` (exclusive) per axis.
     pub fn cell_box(&self, lo: [u32; 3], hi: [u32; 3]) -> Aabb {
         Aabb::new(
-            DVec3::new(self.boundary(0, lo[0]), self.boundary(1, lo[1]), self.boundary(2, lo[2])),
-            DVec3::new(self.boundary(0, hi[0]), self.boundary(1, hi[1]), self.boundary(2, hi[2])),
+            DVec3::new(
+                self.boundary(0, lo[0]),
+                self.boundary(1, lo[1]),
+                self.boundary(2, lo[2]),
+            ),
+            DVec3::new(
+                self.boundary(0, hi[0]),
+                self.boundary(1, hi[1]),
+                self.boundary(2, hi[2]),
+            ),
         )
     }
 
@@ -67,7 +75,9 @@ impl Grid {
             let n = self.counts[a];
             let ext = self.max[a] - self.min[a];
             let mut i = if ext > 0.0 {
-                (((p[a] - self.min[a]) / ext) * f64::from(n)).floor().max(0.0) as u32
+                (((p[a] - self.min[a]) / ext) * f64::from(n))
+                    .floor()
+                    .max(0.0) as u32
             } else {
                 0
             };
@@ -233,15 +243,22 @@ impl RegionCosts {
             .iter()
             .zip(&ctx.hierarchy.object_spheres)
             .map(|(o, s)| {
-                ctx.model
-                    .geometry(o.draw_calls, o.triangles, s.radius, region.distance_to_point(s.center))
+                ctx.model.geometry(
+                    o.draw_calls,
+                    o.triangles,
+                    s.radius,
+                    region.distance_to_point(s.center),
+                )
             })
             .collect();
         let h = ctx.hierarchy;
         let mut nodes = vec![Cost::default(); h.nodes.len()];
         for id in (0..h.nodes.len()).rev() {
             nodes[id] = match h.nodes[id].children {
-                None => h.objects(id as u32).iter().fold(Cost::default(), |acc, &o| acc + objects[o as usize]),
+                None => h
+                    .objects(id as u32)
+                    .iter()
+                    .fold(Cost::default(), |acc, &o| acc + objects[o as usize]),
                 Some([l, r]) => nodes[l as usize] + nodes[r as usize],
             };
         }
@@ -302,10 +319,11 @@ pub fn enclosed_cost(
                 visit(ctx, costs, cone, region, l, emit) + visit(ctx, costs, cone, region, r, emit)
             }
         };
-        if let Some(out) = emit.as_deref_mut() {
-            if (c.cpu > 0.0 || c.gpu > 0.0) && replaceable(n) {
-                out.push((n, c));
-            }
+        if let Some(out) = emit.as_deref_mut()
+            && (c.cpu > 0.0 || c.gpu > 0.0)
+            && replaceable(n)
+        {
+            out.push((n, c));
         }
         c
     }
@@ -378,7 +396,13 @@ struct RegionResult {
     regions: u64,
 }
 
-fn process(ctx: &Context, kd: &[KdNode], id: u32, parent_problems: &[Vdi], leaf_level: u8) -> RegionResult {
+fn process(
+    ctx: &Context,
+    kd: &[KdNode],
+    id: u32,
+    parent_problems: &[Vdi],
+    leaf_level: u8,
+) -> RegionResult {
     let node = &kd[id as usize];
     let region = node.aabb;
     let costs = RegionCosts::new(ctx, &region);
@@ -392,7 +416,9 @@ fn process(ctx: &Context, kd: &[KdNode], id: u32, parent_problems: &[Vdi], leaf_
         }
         let cone = enclosing_cone(&region, &vdi, ctx.half_diagonal);
         cones += 1;
-        let t = ctx.model.frame_time(enclosed_cost(ctx, &costs, &cone, &region, None));
+        let t = ctx
+            .model
+            .frame_time(enclosed_cost(ctx, &costs, &cone, &region, None));
         if t <= ctx.t_max {
             continue;
         }
@@ -423,7 +449,9 @@ fn process(ctx: &Context, kd: &[KdNode], id: u32, parent_problems: &[Vdi], leaf_
                     // impostor has at least one layer.
                     nodes.retain(|&(n, orig)| {
                         let s = h.nodes[n as usize].sphere;
-                        let imp = ctx.model.impostor(1, s.radius, region.distance_to_point(s.center));
+                        let imp =
+                            ctx.model
+                                .impostor(1, s.radius, region.distance_to_point(s.center));
                         ctx.model.frame_time(cost - orig + imp) < t
                     });
                     nodes.sort_unstable_by_key(|&(n, _)| n);
@@ -468,7 +496,16 @@ pub fn approximate(ctx: &Context, job: &Job) -> ProblemViews {
     let level = leaf_level(job.problem_views.min_vdi_deg);
     let n = 1u32 << level;
     let all: Vec<Vdi> = (0..6u8)
-        .flat_map(|face| (0..n).flat_map(move |iv| (0..n).map(move |iu| Vdi { face, level, iu, iv })))
+        .flat_map(|face| {
+            (0..n).flat_map(move |iv| {
+                (0..n).map(move |iu| Vdi {
+                    face,
+                    level,
+                    iu,
+                    iv,
+                })
+            })
+        })
         .collect();
     let res = process(ctx, &kd, 0, &all, level);
     // CPV ranges per kd node: CPVs come in kd pre-order, so every subtree's
@@ -488,7 +525,11 @@ pub fn approximate(ctx: &Context, job: &Job) -> ProblemViews {
         }
     }
     for (i, node) in kd.iter_mut().enumerate() {
-        node.cpvs = if first[i] == u32::MAX { (0, 0) } else { (first[i], last[i]) };
+        node.cpvs = if first[i] == u32::MAX {
+            (0, 0)
+        } else {
+            (first[i], last[i])
+        };
     }
     ProblemViews {
         grid,
@@ -505,9 +546,9 @@ pub fn approximate(ctx: &Context, job: &Job) -> ProblemViews {
 pub fn enclosing_time(ctx: &Context, region: &Aabb, vdi: &Vdi) -> f64 {
     let costs = RegionCosts::new(ctx, region);
     let cone = enclosing_cone(region, vdi, ctx.half_diagonal);
-    ctx.model.frame_time(enclosed_cost(ctx, &costs, &cone, region, None))
+    ctx.model
+        .frame_time(enclosed_cost(ctx, &costs, &cone, region, None))
 }
-
 
 #[cfg(test)]
 mod tests {
@@ -523,7 +564,11 @@ mod tests {
         let mut rng = Rng::new(11);
         for case in 0..300 {
             let lo = rng.in_box(DVec3::splat(-50.0), DVec3::splat(50.0));
-            let ext = DVec3::new(rng.range(0.0, 30.0), rng.range(0.0, 10.0), rng.range(0.0, 30.0));
+            let ext = DVec3::new(
+                rng.range(0.0, 30.0),
+                rng.range(0.0, 10.0),
+                rng.range(0.0, 30.0),
+            );
             let region = Aabb::new(lo, lo + ext);
             let level = (rng.next_u64() % 5) as u8;
             let n = 1u32 << level;
@@ -546,7 +591,10 @@ mod tests {
                     let c = rng.in_box(DVec3::splat(-300.0), DVec3::splat(300.0));
                     let r = rng.range(0.0, 20.0);
                     if f.intersects_sphere(c, r) {
-                        assert!(cone.intersects_sphere(c, r), "case {case}: sphere {c} r {r} seen from {eye} dir {dir}");
+                        assert!(
+                            cone.intersects_sphere(c, r),
+                            "case {case}: sphere {c} r {r} seen from {eye} dir {dir}"
+                        );
                     }
                 }
             }
@@ -561,7 +609,10 @@ mod tests {
         assert_eq!(g.counts, [66, 1, 44]);
         let b = g.cell_box([65, 0, 43], [66, 1, 44]);
         assert_eq!(b.max, DVec3::new(1500.0, 2.0, 1000.0));
-        assert_eq!(g.cell_of(DVec3::new(1500.0, 2.0, 1000.0)), Some([65, 0, 43]));
+        assert_eq!(
+            g.cell_of(DVec3::new(1500.0, 2.0, 1000.0)),
+            Some([65, 0, 43])
+        );
         let x = g.boundary(0, 10);
         assert_eq!(g.cell_of(DVec3::new(x, 1.7, 0.0)).unwrap()[0], 10);
         assert_eq!(g.cell_of(DVec3::new(x - 1e-9, 1.7, 0.0)).unwrap()[0], 9);
@@ -578,7 +629,10 @@ mod tests {
         let h = Hierarchy::build(&scene);
         let ctx = Context::new(&scene, &h, &job);
         let pv = approximate(&ctx, &job);
-        assert!(!pv.cpvs.is_empty(), "the synthetic job must have problem views");
+        assert!(
+            !pv.cpvs.is_empty(),
+            "the synthetic job must have problem views"
+        );
         for c in &pv.cpvs {
             assert!(c.time > job.target_frame_time_ms);
             assert!(pv.kd[c.kd as usize].children.is_none());

@@ -34,7 +34,11 @@ impl Rng {
 
     /// Uniform in the box.
     pub fn in_box(&mut self, lo: DVec3, hi: DVec3) -> DVec3 {
-        DVec3::new(self.range(lo.x, hi.x), self.range(lo.y, hi.y), self.range(lo.z, hi.z))
+        DVec3::new(
+            self.range(lo.x, hi.x),
+            self.range(lo.y, hi.y),
+            self.range(lo.z, hi.z),
+        )
     }
 
     /// Uniform on the unit sphere.

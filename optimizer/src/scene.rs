@@ -50,7 +50,10 @@ impl Scene {
     /// finite bounds with `min <= max`. `source` names the input in errors.
     pub fn validate(&self, source: &str) -> Result<()> {
         if self.objects.is_empty() {
-            return Err(Error::bad(source, "the scene has no objects (no node draws a mesh)"));
+            return Err(Error::bad(
+                source,
+                "the scene has no objects (no node draws a mesh)",
+            ));
         }
         for (id, o) in self.objects.iter().enumerate() {
             if !(o.min.is_finite() && o.max.is_finite()) {

@@ -17,8 +17,17 @@ pub fn synthetic_city(seed: u64, nx: u32, nz: u32) -> Scene {
             let base = DVec3::new(f64::from(bx) * 40.0 + 6.0, 0.0, f64::from(bz) * 40.0 + 6.0);
             let count = 2 + (rng.next_u64() % 5) as usize;
             for _ in 0..count {
-                let size = DVec3::new(rng.range(1.0, 12.0), rng.range(1.0, 30.0), rng.range(1.0, 12.0));
-                let p = base + DVec3::new(rng.range(0.0, 28.0 - size.x), 0.0, rng.range(0.0, 28.0 - size.z));
+                let size = DVec3::new(
+                    rng.range(1.0, 12.0),
+                    rng.range(1.0, 30.0),
+                    rng.range(1.0, 12.0),
+                );
+                let p = base
+                    + DVec3::new(
+                        rng.range(0.0, 28.0 - size.x),
+                        0.0,
+                        rng.range(0.0, 28.0 - size.z),
+                    );
                 objects.push(Object {
                     name: format!("o{}", objects.len()),
                     min: p,
