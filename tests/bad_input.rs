@@ -142,7 +142,7 @@ fn missing_files_and_bad_arguments() {
         "{}",
         stderr(&o)
     );
-    let o = run(&["gen-city", "--scale", "-1", "-o", s(&dir.join("c.glb"))]);
+    let o = run(&["gen-city", "--scale=-1", "-o", s(&dir.join("c.glb"))]);
     assert_eq!(code(&o), 2);
     assert!(stderr(&o).contains("scale"), "{}", stderr(&o));
     let o = run(&["place", s(&job), "--job", s(&job), "--threads", "0"]);

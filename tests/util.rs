@@ -96,3 +96,26 @@ pub fn city(scale: &str) -> PathBuf {
     }
     path
 }
+
+/// Asserts that two files are byte-identical; on failure names the first
+/// differing line instead of dumping the bytes.
+pub fn assert_same_file(a: &Path, b: &Path) {
+    let (x, y) = (std::fs::read(a).unwrap(), std::fs::read(b).unwrap());
+    if x == y {
+        return;
+    }
+    let (xs, ys) = (String::from_utf8_lossy(&x), String::from_utf8_lossy(&y));
+    let line = xs
+        .lines()
+        .zip(ys.lines())
+        .position(|(l, r)| l != r)
+        .unwrap_or_else(|| xs.lines().count().min(ys.lines().count()));
+    panic!(
+        "{} and {} differ at line {}: {:?} vs {:?}",
+        a.display(),
+        b.display(),
+        line + 1,
+        xs.lines().nth(line),
+        ys.lines().nth(line)
+    );
+}

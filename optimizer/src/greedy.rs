@@ -265,13 +265,18 @@ impl<'a> State<'a> {
     }
 }
 
+/// Stale keys refreshed together in [`select_lazy`].
+pub const LAZY_BATCH: usize = 8;
+
 /// Lazy greedy selection.
 ///
 /// Keys carry the state version they were computed in; a key popped with the
 /// current version is exact and, being the largest of upper bounds, is the
-/// greedy choice. Stale keys are recomputed a batch at a time in parallel.
-/// Every choice is the exact greedy choice, so the result does not depend on
-/// the batch size or the thread count.
+/// greedy choice. Stale keys are recomputed a batch of [`LAZY_BATCH`] at a
+/// time in parallel. Scores can rise (memory regained by hierarchy
+/// replacement), so which stale keys get refreshed may change the choice: the
+/// batch is a constant, never derived from the thread count, so the result is
+/// the same for any number of threads.
 pub fn select_lazy(ctx: &Context, pv: &ProblemViews, cands: &Candidates) -> Selection {
     let mut st = State::new(ctx, pv, cands);
     let initial: Vec<f64> = (0..cands.list.len() as u32)
@@ -293,7 +298,7 @@ pub fn select_lazy(ctx: &Context, pv: &ProblemViews, cands: &Candidates) -> Sele
             )
         })
         .collect();
-    let batch = 2 * rayon::current_num_threads().max(1);
+    let batch = LAZY_BATCH;
     let mut version = 0u64;
     let mut stale: Vec<u32> = Vec::with_capacity(batch);
     while let Some(&(top, stamp)) = heap.peek() {
