@@ -317,6 +317,37 @@ mod tests {
         }
     }
 
+    /// The oracle is not blind: with every impostor taken out of a solved
+    /// placement, the views that needed them exceed `t_max` again and
+    /// `evaluate` must report them as violations among solved CPVs.
+    #[test]
+    fn evaluation_catches_a_stripped_placement() {
+        let scene = synthetic_city(1, 5, 5);
+        let job = synthetic_job(5, 5);
+        let mut p = place(&scene, &job, &PlaceOptions::default()).placement;
+        let over = p
+            .cpvs
+            .iter()
+            .filter(|c| c.time_ms_original > job.target_frame_time_ms)
+            .count();
+        assert!(over > 0, "the job must need impostors");
+        let opts = EvalOptions {
+            views: 3000,
+            seed: 5,
+        };
+        let honest = evaluate(&scene, &job, &p, &opts, "p.json").unwrap();
+        assert_eq!(honest.violations_in_solved, 0);
+        for c in &mut p.cpvs {
+            c.impostors.clear();
+        }
+        let stripped = evaluate(&scene, &job, &p, &opts, "p.json").unwrap();
+        assert!(
+            stripped.violations_in_solved > 0,
+            "{over} CPVs exceed t_max without impostors, yet: {stripped:?}"
+        );
+        assert!(stripped.max_ms > job.target_frame_time_ms);
+    }
+
     #[test]
     fn lazy_equals_naive_greedy() {
         for seed in [1, 4, 7] {
