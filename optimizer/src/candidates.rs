@@ -53,10 +53,24 @@ pub struct Candidates {
     /// (CPV id, index of the cluster in the CPV's `node_ids`), grouped by
     /// cluster and then by cell.
     pub pairs: Vec<(u32, u32)>,
-    /// Groups: ranges of `pairs`.
-    pub groups: Vec<(u32, u32)>,
+    /// Groups: ranges of `pairs`, each with its cell and distance.
+    pub groups: Vec<Group>,
     /// Group ids served by the candidates (see `Candidate::served`).
     pub served: Vec<u32>,
+}
+
+/// One cell's CPVs that list one cluster.
+#[derive(Clone, Copy, Debug)]
+pub struct Group {
+    /// The range `pairs[start..end]`.
+    pub start: u32,
+    /// End of the range.
+    pub end: u32,
+    /// The cell (kd leaf) of the CPVs.
+    pub kd: u32,
+    /// Distance from the cell's region to the cluster's sphere centre; all
+    /// CPVs of the group share it, hence an impostor's cost there.
+    pub dist: f64,
 }
 
 impl Candidates {
@@ -66,8 +80,8 @@ impl Candidates {
     pub fn for_each_served(&self, i: u32, mut f: impl FnMut(u32, u32)) {
         let (s, n) = self.list[i as usize].served;
         for &g in &self.served[s as usize..(s + n) as usize] {
-            let (a, b) = self.groups[g as usize];
-            for &(c, idx) in &self.pairs[a as usize..b as usize] {
+            let gr = self.groups[g as usize];
+            for &(c, idx) in &self.pairs[gr.start as usize..gr.end as usize] {
                 f(c, idx);
             }
         }
@@ -191,15 +205,22 @@ pub fn generate(ctx: &Context, job: &Job, pv: &ProblemViews) -> Candidates {
         }
     }
     drop(fill);
-    let mut groups: Vec<(u32, u32)> = Vec::new();
+    let mut groups: Vec<Group> = Vec::new();
     let mut node_groups = vec![(0u32, 0u32); h.nodes.len()];
     for n in 0..h.nodes.len() {
         let g0 = groups.len() as u32;
         let (a, b) = (count[n] as usize, count[n + 1] as usize);
+        let center = h.nodes[n].sphere.center;
         let mut s = a;
         for k in a + 1..=b {
             if k == b || pv.cpvs[pairs[k].0 as usize].kd != pv.cpvs[pairs[s].0 as usize].kd {
-                groups.push((s as u32, k as u32));
+                let first = &pv.cpvs[pairs[s].0 as usize];
+                groups.push(Group {
+                    start: s as u32,
+                    end: k as u32,
+                    kd: first.kd,
+                    dist: first.region.distance_to_point(center),
+                });
                 s = k;
             }
         }
@@ -220,11 +241,11 @@ pub fn generate(ctx: &Context, job: &Job, pv: &ProblemViews) -> Candidates {
             // (key, group) for every cell inside the key's view cell.
             let mut tuples: Vec<(Key, u32)> = Vec::new();
             for g in g0..g1 {
-                let (a, b) = groups[g as usize];
-                let group = &pairs[a as usize..b as usize];
+                let gr = groups[g as usize];
+                let group = &pairs[gr.start as usize..gr.end as usize];
                 let first = &pv.cpvs[group[0].0 as usize];
                 let region = first.region;
-                let dist = region.distance_to_point(sphere.center);
+                let dist = gr.dist;
                 // Some CPV of the cell is accelerated by an impostor of `spec`.
                 let helps = |spec: &ImpostorSpec| {
                     let imp = ctx.model.impostor(spec.layers, sphere.radius, dist);

@@ -3,11 +3,14 @@
 //! `Δt_{i,CPV} = max(0, t_CPV − max(t^i_CPV, t_max))` where `t^i_CPV` is the
 //! CPV's time with the cluster's current representation (its geometry, or
 //! descendant impostors already placed there) replaced by impostor `i`;
-//! `s_i = Σ_CPV Δt_{i,CPV} / m_i`. A max-heap holds stale scores; the top is
-//! recomputed and accepted if it still beats the next key, else re-pushed.
-//! This is exact because no score increases when an impostor is added (in the
-//! `sum` and `primitives` modes; in the `max` mode it is a heuristic). Ties
-//! are broken by the lower candidate id, so the result is deterministic.
+//! `s_i = Σ_CPV Δt_{i,CPV} / m_i`. A max-heap holds scores stamped with the
+//! state version they were computed in; a stale top is recomputed (with a
+//! fixed-size batch of the stale keys below it) and re-pushed, a fresh top is
+//! accepted. In exact arithmetic no score increases when an impostor is added
+//! (`sum` and `primitives` modes), so a fresh top is the greedy choice; in
+//! `max` mode, and by rounding, lazy recalculation is a heuristic. Ties are
+//! broken by the lower candidate id and the batch never depends on the
+//! thread count, so the result is deterministic.
 //!
 //! Accepting `i` adds it to every CPV it accelerates, replacing descendant
 //! impostors there; an impostor left in no CPV is deleted and its memory
@@ -87,6 +90,9 @@ struct State<'a> {
     /// Per (CPV, listed cluster): represented by an impostor of itself or of
     /// an ancestor.
     covered: Vec<bool>,
+    /// Per (CPV, listed cluster): the index in the CPV's list of its nearest
+    /// listed ancestor, or `u32::MAX`.
+    up: Vec<u32>,
     /// Per kd node (cell): how many of its CPVs are still above `t_max`. A
     /// solved CPV adds nothing to any score, so cells without unsolved CPVs
     /// are skipped when scoring.
@@ -123,6 +129,11 @@ impl<'a> State<'a> {
                 .flat_map(|c| c.node_costs.iter().copied())
                 .collect(),
             covered: vec![false; pv.cpvs.iter().map(|c| c.node_ids.len()).sum()],
+            up: pv
+                .cpvs
+                .par_iter()
+                .flat_map_iter(|c| listed_ancestors(ctx, &c.node_ids))
+                .collect(),
             unsolved_in_cell: {
                 let mut v = vec![0u32; pv.kd.len()];
                 for c in &pv.cpvs {
@@ -178,19 +189,13 @@ impl<'a> State<'a> {
         let s = self.ctx.hierarchy.nodes[cand.node as usize].sphere;
         let (start, n) = cand.served;
         for &g in &all.served[start as usize..(start + n) as usize] {
-            let (a, b) = all.groups[g as usize];
-            let pairs = &all.pairs[a as usize..b as usize];
-            let first = &self.pv.cpvs[pairs[0].0 as usize];
-            if unsolved_only && self.unsolved_in_cell[first.kd as usize] == 0 {
+            let gr = all.groups[g as usize];
+            if unsolved_only && self.unsolved_in_cell[gr.kd as usize] == 0 {
                 continue;
             }
+            let pairs = &all.pairs[gr.start as usize..gr.end as usize];
             // All CPVs of a group share their region, hence the impostor's cost.
-            let region = &first.region;
-            let imp = self.ctx.model.impostor(
-                cand.spec.layers,
-                s.radius,
-                region.distance_to_point(s.center),
-            );
+            let imp = self.ctx.model.impostor(cand.spec.layers, s.radius, gr.dist);
             for &(c, idx) in pairs {
                 if unsolved_only
                     && self.ctx.model.frame_time(self.sel.cpv_cost[c as usize]) <= self.ctx.t_max
@@ -234,12 +239,11 @@ impl<'a> State<'a> {
                 self.covered[off + k] = true;
             }
             // Every listed ancestor's representation got cheaper.
-            let mut a = h.nodes[node as usize].parent;
+            let mut a = self.up[off + idx];
             while a != u32::MAX {
-                if let Some(ai) = cpv.node_index(a) {
-                    self.rep[off + ai] = self.rep[off + ai] - saving;
-                }
-                a = h.nodes[a as usize].parent;
+                let flat = off + a as usize;
+                self.rep[flat] = self.rep[flat] - saving;
+                a = self.up[flat];
             }
             let list = &mut self.sel.cpv_impostors[cu];
             let cands = self.cands;
@@ -263,6 +267,25 @@ impl<'a> State<'a> {
         }
         self.sel.accepted += 1;
     }
+}
+
+/// For a CPV's cluster list (node ids ascending, i.e. hierarchy pre-order):
+/// per entry, the index of its nearest listed ancestor, or `u32::MAX`.
+fn listed_ancestors(ctx: &Context, ids: &[u32]) -> Vec<u32> {
+    let nodes = &ctx.hierarchy.nodes;
+    let mut up = Vec::with_capacity(ids.len());
+    let mut open: Vec<u32> = Vec::new();
+    for &n in ids {
+        while let Some(&top) = open.last() {
+            if n < nodes[ids[top as usize] as usize].subtree_end {
+                break;
+            }
+            open.pop();
+        }
+        up.push(open.last().copied().unwrap_or(u32::MAX));
+        open.push(up.len() as u32 - 1);
+    }
+    up
 }
 
 /// Stale keys refreshed together in [`select_lazy`].
