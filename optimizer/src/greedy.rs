@@ -289,7 +289,7 @@ fn listed_ancestors(ctx: &Context, ids: &[u32]) -> Vec<u32> {
 }
 
 /// Stale keys refreshed together in [`select_lazy`].
-pub const LAZY_BATCH: usize = 8;
+pub const LAZY_BATCH: usize = 32;
 
 /// Lazy greedy selection.
 ///
