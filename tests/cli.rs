@@ -12,16 +12,7 @@ fn place_and_evaluate_small_city() {
     let city = city("0.1");
     let out = dir.join("placement.json");
     let stats = dir.join("stats.json");
-    let o = run(&[
-        "place",
-        s(&city),
-        "--job",
-        s(&small_job()),
-        "-o",
-        s(&out),
-        "--stats",
-        s(&stats),
-    ]);
+    let o = place(&city, &small_job(), &out, &["--stats", s(&stats)]);
     let c = code(&o);
     assert!(c == 0 || c == 3, "exit {c}: {}", stderr(&o));
     let p = read_json(&out);
@@ -36,18 +27,7 @@ fn place_and_evaluate_small_city() {
     assert!(st["seconds"].as_array().unwrap().len() >= 5);
 
     let eval = dir.join("eval.json");
-    let o = run(&[
-        "evaluate",
-        s(&city),
-        "--job",
-        s(&small_job()),
-        "--placement",
-        s(&out),
-        "-o",
-        s(&eval),
-        "--views",
-        "4000",
-    ]);
+    let o = evaluate(&city, &small_job(), &out, &eval, 4000);
     assert_eq!(code(&o), 0, "{}", stderr(&o));
     let e = read_json(&eval);
     assert_eq!(e["violations_in_solved"], 0, "{e}");
@@ -65,16 +45,7 @@ fn same_bytes_for_any_thread_count() {
     let mut outputs = Vec::new();
     for t in ["1", "2", "3"] {
         let out = dir.join(format!("p{t}.json"));
-        let o = run(&[
-            "place",
-            s(&city),
-            "--job",
-            s(&small_job()),
-            "-o",
-            s(&out),
-            "--threads",
-            t,
-        ]);
+        let o = place(&city, &small_job(), &out, &["--threads", t]);
         assert!(matches!(code(&o), 0 | 3), "{}", stderr(&o));
         outputs.push(out);
     }
@@ -87,33 +58,14 @@ fn prune_never_needs_more_memory() {
     let dir = tmp("prune");
     let city = city("0.1");
     let (a, b) = (dir.join("a.json"), dir.join("b.json"));
-    let o = run(&["place", s(&city), "--job", s(&small_job()), "-o", s(&a)]);
+    let o = place(&city, &small_job(), &a, &[]);
     assert!(matches!(code(&o), 0 | 3));
-    let o = run(&[
-        "place",
-        s(&city),
-        "--job",
-        s(&small_job()),
-        "-o",
-        s(&b),
-        "--prune",
-    ]);
+    let o = place(&city, &small_job(), &b, &["--prune"]);
     assert!(matches!(code(&o), 0 | 3));
     let (pa, pb) = (read_json(&a), read_json(&b));
     assert!(pb["summary"]["memory_bytes"].as_u64() <= pa["summary"]["memory_bytes"].as_u64());
     let eval = dir.join("e.json");
-    let o = run(&[
-        "evaluate",
-        s(&city),
-        "--job",
-        s(&small_job()),
-        "--placement",
-        s(&b),
-        "-o",
-        s(&eval),
-        "--views",
-        "2000",
-    ]);
+    let o = evaluate(&city, &small_job(), &b, &eval, 2000);
     assert_eq!(code(&o), 0, "{}", stderr(&o));
     assert_eq!(read_json(&eval)["violations_in_solved"], 0);
 }
@@ -135,8 +87,8 @@ fn summary_scene_places_like_the_glb() {
     ]);
     assert_eq!(code(&o), 0, "{}", stderr(&o));
     let (a, b) = (dir.join("a.json"), dir.join("b.json"));
-    let o1 = run(&["place", s(&city), "--job", s(&small_job()), "-o", s(&a)]);
-    let o2 = run(&["place", s(&summary), "--job", s(&small_job()), "-o", s(&b)]);
+    let o1 = place(&city, &small_job(), &a, &[]);
+    let o2 = place(&summary, &small_job(), &b, &[]);
     assert_eq!(code(&o1), code(&o2));
     assert_same_file(&a, &b);
 }

@@ -28,7 +28,7 @@ fn real_scenes_place_and_pass_the_check() {
         }
         let job = root().join(format!("fixtures/jobs/{name}.json"));
         let p = out.join(format!("{name}.placement.json"));
-        let o = run(&["place", s(&scene), "--job", s(&job), "-o", s(&p)]);
+        let o = place(&scene, &job, &p, &[]);
         assert!(
             matches!(code(&o), 0 | 3),
             "{name}: exit {}: {}",
@@ -41,18 +41,7 @@ fn real_scenes_place_and_pass_the_check() {
             "{name}: the job should have problem views"
         );
         let e = out.join(format!("{name}.eval.json"));
-        let o = run(&[
-            "evaluate",
-            s(&scene),
-            "--job",
-            s(&job),
-            "--placement",
-            s(&p),
-            "-o",
-            s(&e),
-            "--views",
-            "2000",
-        ]);
+        let o = evaluate(&scene, &job, &p, &e, 2000);
         assert_eq!(code(&o), 0, "{name}: {}", stderr(&o));
         let eval = read_json(&e);
         assert_eq!(eval["violations_in_solved"], 0, "{name}: {eval}");

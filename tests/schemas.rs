@@ -53,29 +53,9 @@ fn outputs_conform() {
         dir.join("s.json"),
         dir.join("sum.json"),
     );
-    let o = run(&[
-        "place",
-        s(&city),
-        "--job",
-        s(&job),
-        "-o",
-        s(&p),
-        "--stats",
-        s(&st),
-    ]);
+    let o = place(&city, &job, &p, &["--stats", s(&st)]);
     assert!(matches!(code(&o), 0 | 3), "{}", stderr(&o));
-    let o = run(&[
-        "evaluate",
-        s(&city),
-        "--job",
-        s(&job),
-        "--placement",
-        s(&p),
-        "-o",
-        s(&e),
-        "--views",
-        "500",
-    ]);
+    let o = evaluate(&city, &job, &p, &e, 500);
     assert_eq!(code(&o), 0, "{}", stderr(&o));
     let o = run(&["gen-city", "--scale", "0.1", "--summary", "-o", s(&sum)]);
     assert_eq!(code(&o), 0);

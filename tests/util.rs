@@ -119,3 +119,27 @@ pub fn assert_same_file(a: &Path, b: &Path) {
         ys.lines().nth(line)
     );
 }
+
+/// Runs `impostor place SCENE --job JOB -o OUT` with `extra` arguments.
+pub fn place(scene: &Path, job: &Path, out: &Path, extra: &[&str]) -> Output {
+    let mut args = vec!["place", s(scene), "--job", s(job), "-o", s(out)];
+    args.extend_from_slice(extra);
+    run(&args)
+}
+
+/// Runs `impostor evaluate SCENE --job JOB --placement P -o OUT --views N`.
+pub fn evaluate(scene: &Path, job: &Path, placement: &Path, out: &Path, views: u32) -> Output {
+    let views = views.to_string();
+    run(&[
+        "evaluate",
+        s(scene),
+        "--job",
+        s(job),
+        "--placement",
+        s(placement),
+        "-o",
+        s(out),
+        "--views",
+        &views,
+    ])
+}
