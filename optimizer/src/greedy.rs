@@ -152,6 +152,11 @@ impl<'a> State<'a> {
         }
     }
 
+    /// CPVs still above `t_max`.
+    fn unsolved(&self) -> u64 {
+        self.unsolved_in_cell.iter().map(|&n| u64::from(n)).sum()
+    }
+
     /// Cost of impostor `j` in CPV `cpv`.
     fn impostor_cost(&self, j: u32, cpv: &Cpv) -> Cost {
         let cand = &self.cands[j as usize];
@@ -300,8 +305,17 @@ pub const LAZY_BATCH: usize = 32;
 /// replacement), so which stale keys get refreshed may change the choice: the
 /// batch is a constant, never derived from the thread count, so the result is
 /// the same for any number of threads.
-pub fn select_lazy(ctx: &Context, pv: &ProblemViews, cands: &Candidates) -> Selection {
+///
+/// `progress(unsolved)` is called now and then with the number of CPVs still
+/// above `t_max`.
+pub fn select_lazy(
+    ctx: &Context,
+    pv: &ProblemViews,
+    cands: &Candidates,
+    progress: &mut dyn FnMut(u64),
+) -> Selection {
     let mut st = State::new(ctx, pv, cands);
+    progress(st.unsolved());
     let initial: Vec<f64> = (0..cands.list.len() as u32)
         .into_par_iter()
         .map(|i| st.score(i))
@@ -329,6 +343,9 @@ pub fn select_lazy(ctx: &Context, pv: &ProblemViews, cands: &Candidates) -> Sele
             heap.pop();
             st.accept(top.id);
             version += 1;
+            if version % 64 == 0 {
+                progress(st.unsolved());
+            }
             continue;
         }
         // Recompute the stale keys at the top, up to a batch, in parallel.

@@ -70,6 +70,12 @@ impl Stages {
         self.start = Instant::now();
     }
 
+    fn message(&self, msg: &str) {
+        if let Some(b) = &self.bar {
+            b.set_message(msg.to_string());
+        }
+    }
+
     fn end(&mut self, stage: &str) {
         let seconds = self.start.elapsed().as_secs_f64();
         if self.verbose {
@@ -114,7 +120,14 @@ pub fn place(scene: &Scene, job: &Job, opts: &PlaceOptions) -> PlaceOutput {
         "greedy selection over {} candidates",
         cands.list.len()
     ));
-    let mut sel = greedy::select_lazy(&ctx, &pv, &cands);
+    let total = pv.cpvs.len();
+    let mut sel = greedy::select_lazy(&ctx, &pv, &cands, &mut |unsolved| {
+        st.message(&format!(
+            "greedy selection over {} candidates: {} of {total} CPVs above the target",
+            cands.list.len(),
+            unsolved
+        ));
+    });
     st.end("greedy");
     if opts.prune {
         st.begin("pruning");
@@ -359,7 +372,7 @@ mod tests {
             let pv = problem_views::approximate(&ctx, &job);
             let cands = candidates::generate(&ctx, &job, &pv);
             assert!(!cands.list.is_empty());
-            let lazy = greedy::select_lazy(&ctx, &pv, &cands);
+            let lazy = greedy::select_lazy(&ctx, &pv, &cands, &mut |_| {});
             let naive = greedy::select_naive(&ctx, &pv, &cands);
             assert_eq!(lazy.uses, naive.uses, "seed {seed}");
             assert_eq!(lazy.cpv_impostors, naive.cpv_impostors);
