@@ -24,6 +24,9 @@ pub enum Error {
         /// The underlying error.
         source: std::io::Error,
     },
+    /// The run was cancelled through [`crate::pipeline::Control::cancel`].
+    #[error("cancelled")]
+    Cancelled,
     /// A broken internal invariant: a bug, please report it.
     #[error("internal error (a bug): {0}")]
     Internal(String),

@@ -307,15 +307,18 @@ pub const LAZY_BATCH: usize = 32;
 /// the same for any number of threads.
 ///
 /// `progress(unsolved)` is called now and then with the number of CPVs still
-/// above `t_max`.
+/// above `t_max`; when it returns false the selection stops early (the
+/// caller discards the incomplete selection).
 pub fn select_lazy(
     ctx: &Context,
     pv: &ProblemViews,
     cands: &Candidates,
-    progress: &mut dyn FnMut(u64),
+    progress: &mut dyn FnMut(u64) -> bool,
 ) -> Selection {
     let mut st = State::new(ctx, pv, cands);
-    progress(st.unsolved());
+    if !progress(st.unsolved()) {
+        return st.sel;
+    }
     let initial: Vec<f64> = (0..cands.list.len() as u32)
         .into_par_iter()
         .map(|i| st.score(i))
@@ -343,8 +346,8 @@ pub fn select_lazy(
             heap.pop();
             st.accept(top.id);
             version += 1;
-            if version % 64 == 0 {
-                progress(st.unsolved());
+            if version % 64 == 0 && !progress(st.unsolved()) {
+                break;
             }
             continue;
         }

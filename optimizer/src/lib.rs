@@ -33,5 +33,14 @@ pub mod testutil;
 
 pub use error::{Error, Result};
 
+/// Pretty-printed JSON with a final newline: the byte format of every JSON
+/// file the tool writes (the CLI and the HTTP service share it, so the same
+/// placement has the same bytes through either).
+pub fn to_json_bytes(value: &impl serde::Serialize) -> Result<Vec<u8>> {
+    let mut v = serde_json::to_vec_pretty(value).map_err(|e| Error::Internal(e.to_string()))?;
+    v.push(b'\n');
+    Ok(v)
+}
+
 /// Version of this library.
 pub const VERSION: &str = env!("CARGO_PKG_VERSION");

@@ -148,9 +148,7 @@ fn set_threads(threads: Option<usize>) -> Result<()> {
 }
 
 fn json(value: &impl serde::Serialize) -> Result<Vec<u8>> {
-    let mut v = serde_json::to_vec_pretty(value).map_err(|e| Error::Internal(e.to_string()))?;
-    v.push(b'\n');
-    Ok(v)
+    optimizer::to_json_bytes(value)
 }
 
 fn run(cli: Cli) -> Result<ExitCode> {

@@ -1,6 +1,7 @@
 //! The placement pipeline: scene → hierarchy → problem views → candidates →
 //! greedy → placement. [`place`] reads as the paper's algorithm outline.
 
+use std::sync::atomic::{AtomicBool, Ordering as AtomicOrdering};
 use std::time::Instant;
 
 use indicatif::{ProgressBar, ProgressStyle};
@@ -16,6 +17,7 @@ use crate::placement::{
 };
 use crate::problem_views::{self, Context, ProblemViews};
 use crate::scene::Scene;
+use crate::{Error, Result};
 
 /// Options of a placement run.
 #[derive(Clone, Copy, Debug, Default)]
@@ -26,6 +28,37 @@ pub struct PlaceOptions {
     pub progress: bool,
     /// Print each stage's wall time to stderr as it finishes.
     pub verbose: bool,
+}
+
+/// Observes a placement run and may stop it (used by the HTTP service).
+#[derive(Clone, Copy, Default)]
+pub struct Control<'a> {
+    /// When set to true, the run stops at the next check (between stages and
+    /// every few greedy choices) with [`Error::Cancelled`].
+    pub cancel: Option<&'a AtomicBool>,
+    /// Called with the stage name (as in the stats) and the fraction of the
+    /// whole run done, in `[0, 1]`.
+    pub on_progress: Option<&'a (dyn Fn(&str, f64) + Sync)>,
+}
+
+impl Control<'_> {
+    fn cancelled(&self) -> bool {
+        self.cancel.is_some_and(|c| c.load(AtomicOrdering::Relaxed))
+    }
+
+    fn check(&self) -> Result<()> {
+        if self.cancelled() {
+            Err(Error::Cancelled)
+        } else {
+            Ok(())
+        }
+    }
+
+    fn progress(&self, stage: &str, fraction: f64) {
+        if let Some(f) = self.on_progress {
+            f(stage, fraction.clamp(0.0, 1.0));
+        }
+    }
 }
 
 /// The result of [`place`].
@@ -102,39 +135,69 @@ impl Drop for Stages {
 
 /// Places impostors for `job` over a validated `scene`.
 pub fn place(scene: &Scene, job: &Job, opts: &PlaceOptions) -> PlaceOutput {
+    match place_controlled(scene, job, opts, &Control::default()) {
+        Ok(out) => out,
+        Err(e) => unreachable!("a run without a cancel flag cannot fail: {e}"),
+    }
+}
+
+/// [`place`] with progress reports and cancellation. The only error is
+/// [`Error::Cancelled`].
+pub fn place_controlled(
+    scene: &Scene,
+    job: &Job,
+    opts: &PlaceOptions,
+    ctl: &Control,
+) -> Result<PlaceOutput> {
     let mut st = Stages::new(opts.progress, opts.verbose);
+    ctl.progress("hierarchy", 0.0);
     st.begin("building the object hierarchy");
     let hierarchy = Hierarchy::build(scene);
     st.end("hierarchy");
+    ctl.check()?;
+    ctl.progress("problem_views", 0.01);
 
     st.begin("approximating the problem view space");
     let ctx = Context::new(scene, &hierarchy, job);
     let pv = problem_views::approximate(&ctx, job);
     st.end("problem_views");
+    ctl.check()?;
+    ctl.progress("candidates", 0.1);
 
     st.begin(&format!("generating candidates for {} CPVs", pv.cpvs.len()));
     let cands = candidates::generate(&ctx, job, &pv);
     st.end("candidates");
+    ctl.check()?;
+    ctl.progress("greedy", 0.2);
 
     st.begin(&format!(
         "greedy selection over {} candidates",
         cands.list.len()
     ));
     let total = pv.cpvs.len();
+    let mut first_unsolved = None;
     let mut sel = greedy::select_lazy(&ctx, &pv, &cands, &mut |unsolved| {
         st.message(&format!(
             "greedy selection over {} candidates: {} of {total} CPVs above the target",
             cands.list.len(),
             unsolved
         ));
+        let start = *first_unsolved.get_or_insert(unsolved.max(1));
+        ctl.progress(
+            "greedy",
+            0.2 + 0.75 * (1.0 - unsolved as f64 / start as f64),
+        );
+        !ctl.cancelled()
     });
     st.end("greedy");
+    ctl.check()?;
     if opts.prune {
         st.begin("pruning");
         greedy::prune(&ctx, &pv, &cands, &mut sel);
         st.end("prune");
     }
 
+    ctl.progress("placement", 0.97);
     st.begin("writing the placement");
     let placement = build_placement(&ctx, job, &pv, &cands, &sel);
     st.end("placement");
@@ -159,7 +222,8 @@ pub fn place(scene: &Scene, job: &Job, opts: &PlaceOptions) -> PlaceOutput {
         seconds: std::mem::take(&mut st.times),
         peak_rss_bytes: peak_rss_bytes(),
     };
-    PlaceOutput { placement, stats }
+    ctl.progress("placement", 1.0);
+    Ok(PlaceOutput { placement, stats })
 }
 
 /// Turns the selection into the placement JSON structure.
@@ -362,6 +426,35 @@ mod tests {
     }
 
     #[test]
+    fn control_reports_progress_and_cancels() {
+        let scene = synthetic_city(1, 5, 5);
+        let job = synthetic_job(5, 5);
+        let seen = std::sync::Mutex::new(Vec::<(String, f64)>::new());
+        let report = |stage: &str, f: f64| seen.lock().unwrap().push((stage.into(), f));
+        let ctl = Control {
+            cancel: None,
+            on_progress: Some(&report),
+        };
+        let out = place_controlled(&scene, &job, &PlaceOptions::default(), &ctl).unwrap();
+        let plain = place(&scene, &job, &PlaceOptions::default());
+        assert_eq!(
+            serde_json::to_string(&out.placement).unwrap(),
+            serde_json::to_string(&plain.placement).unwrap()
+        );
+        let seen = seen.into_inner().unwrap();
+        assert!(seen.windows(2).all(|w| w[0].1 <= w[1].1), "{seen:?}");
+        assert_eq!(seen.last().unwrap(), &("placement".to_string(), 1.0));
+
+        let flag = AtomicBool::new(true);
+        let ctl = Control {
+            cancel: Some(&flag),
+            on_progress: None,
+        };
+        let r = place_controlled(&scene, &job, &PlaceOptions::default(), &ctl);
+        assert!(matches!(r, Err(Error::Cancelled)));
+    }
+
+    #[test]
     fn lazy_equals_naive_greedy() {
         for seed in [1, 4, 7] {
             let scene = synthetic_city(seed, 4, 3);
@@ -372,7 +465,7 @@ mod tests {
             let pv = problem_views::approximate(&ctx, &job);
             let cands = candidates::generate(&ctx, &job, &pv);
             assert!(!cands.list.is_empty());
-            let lazy = greedy::select_lazy(&ctx, &pv, &cands, &mut |_| {});
+            let lazy = greedy::select_lazy(&ctx, &pv, &cands, &mut |_| true);
             let naive = greedy::select_naive(&ctx, &pv, &cands);
             assert_eq!(lazy.uses, naive.uses, "seed {seed}");
             assert_eq!(lazy.cpv_impostors, naive.cpv_impostors);
