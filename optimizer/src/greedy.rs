@@ -346,7 +346,7 @@ pub fn select_lazy(
             heap.pop();
             st.accept(top.id);
             version += 1;
-            if version % 64 == 0 && !progress(st.unsolved()) {
+            if version.is_multiple_of(64) && !progress(st.unsolved()) {
                 break;
             }
             continue;

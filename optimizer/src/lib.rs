@@ -26,6 +26,7 @@ pub mod job;
 pub mod pipeline;
 pub mod placement;
 pub mod problem_views;
+pub mod raster;
 pub mod rng;
 pub mod scene;
 pub mod schema;

@@ -30,6 +30,9 @@ pub struct PlaceOptions {
     pub verbose: bool,
 }
 
+/// A progress observer: stage name and fraction of the whole run done.
+pub type ProgressFn<'a> = &'a (dyn Fn(&str, f64) + Sync);
+
 /// Observes a placement run and may stop it (used by the HTTP service).
 #[derive(Clone, Copy, Default)]
 pub struct Control<'a> {
@@ -38,7 +41,7 @@ pub struct Control<'a> {
     pub cancel: Option<&'a AtomicBool>,
     /// Called with the stage name (as in the stats) and the fraction of the
     /// whole run done, in `[0, 1]`.
-    pub on_progress: Option<&'a (dyn Fn(&str, f64) + Sync)>,
+    pub on_progress: Option<ProgressFn<'a>>,
 }
 
 impl Control<'_> {
