@@ -333,6 +333,9 @@ pub struct Cone {
     sin: f64,
     /// True when the cone covers all of space.
     pub all: bool,
+    /// Points with `(p − apex)·axis < floor` are outside (a plane cutting
+    /// off the apex; 0 keeps the whole cone).
+    pub floor: f64,
 }
 
 impl Cone {
@@ -344,7 +347,15 @@ impl Cone {
             cos: half_angle.cos(),
             sin: half_angle.sin(),
             all: half_angle >= FRAC_PI_2 - 1e-9,
+            floor: 0.0,
         }
+    }
+
+    /// The cone cut by the plane `(p − apex)·axis = floor` (keeping the side
+    /// away from the apex).
+    pub fn with_floor(mut self, floor: f64) -> Cone {
+        self.floor = floor;
+        self
     }
 
     /// Signed distance of `p` to the cone's surface (negative inside) and
@@ -361,14 +372,19 @@ impl Cone {
         if t >= 0.0 { s } else { v.length() }
     }
 
-    /// True when the sphere `(c, r)` meets the cone.
+    /// True when the sphere `(c, r)` may meet the cone: it meets the cone
+    /// and reaches the floor plane's far side (conservative: a sphere that
+    /// meets both only outside their intersection is also accepted).
     pub fn intersects_sphere(&self, c: DVec3, r: f64) -> bool {
-        self.all || self.signed_distance(c) <= r
+        self.all
+            || (self.signed_distance(c) <= r && (c - self.apex).dot(self.axis) + r >= self.floor)
     }
 
-    /// True when the sphere `(c, r)` lies entirely inside the cone.
+    /// True when the sphere `(c, r)` lies entirely inside the cone and on the
+    /// far side of the floor plane.
     pub fn contains_sphere(&self, c: DVec3, r: f64) -> bool {
-        self.all || self.signed_distance(c) <= -r
+        self.all
+            || (self.signed_distance(c) <= -r && (c - self.apex).dot(self.axis) - r >= self.floor)
     }
 }
 
@@ -396,7 +412,17 @@ pub fn enclosing_cone(region: &Aabb, vdi: &Vdi, half_diagonal: f64) -> Cone {
     }
     // Pad by a relative epsilon so corners are strictly inside.
     let push = push + 1e-9 * (1.0 + region.half_diagonal());
-    Cone::new(q - axis * push, axis, gamma)
+    let apex = q - axis * push;
+    // Every frustum of the CPV lies in front of its eye (γ < 90°), so nothing
+    // behind the plane through the region's rearmost corner is seen: cut the
+    // apex off there.
+    let floor = region
+        .corners()
+        .iter()
+        .map(|&c| (c - apex).dot(axis))
+        .fold(f64::INFINITY, f64::min);
+    Cone::new(apex, axis, gamma)
+        .with_floor((floor - 1e-9 * (1.0 + region.half_diagonal())).max(0.0))
 }
 
 /// An exact view frustum: an infinite pyramid with apex at the eye.
