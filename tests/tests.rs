@@ -2,6 +2,7 @@
 //! and real scenes, bad input, determinism and the JSON Schemas.
 
 mod bad_input;
+mod bake;
 mod cli;
 mod real_scenes;
 mod schemas;

@@ -71,6 +71,9 @@ pub struct Evaluation {
     /// Mean of `target − time` over views within the target, ms
     /// (over-conservativeness).
     pub mean_slack_ms: f64,
+    /// Image error of the impostors (`evaluate --images N`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub image: Option<crate::image_eval::ImageReport>,
 }
 
 struct PreparedImpostor {
@@ -362,5 +365,6 @@ pub fn evaluate(
         } else {
             within.iter().map(|t| t_max - t).sum::<f64>() / within.len() as f64
         },
+        image: None,
     })
 }

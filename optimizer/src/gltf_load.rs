@@ -160,7 +160,7 @@ pub fn load_gltf(bytes: &[u8], source: &str, base_dir: Option<&Path>) -> Result<
 
 /// Runs `f`, turning a panic (inside `gltf` or elsewhere) into a bad-input
 /// error for `source`.
-fn guarded<T>(source: &str, f: impl FnOnce() -> Result<T>) -> Result<T> {
+pub(crate) fn guarded<T>(source: &str, f: impl FnOnce() -> Result<T>) -> Result<T> {
     match catch_unwind(AssertUnwindSafe(f)) {
         Ok(result) => result,
         Err(payload) => {
@@ -193,10 +193,10 @@ struct MeshInfo {
 }
 
 /// One node of the scene that draws a mesh.
-struct Instance {
-    node: usize,
-    mesh: usize,
-    world: DAffine3,
+pub(crate) struct Instance {
+    pub(crate) node: usize,
+    pub(crate) mesh: usize,
+    pub(crate) world: DAffine3,
 }
 
 fn load_gltf_inner(bytes: &[u8], source: &str, base_dir: Option<&Path>) -> Result<Scene> {
@@ -259,7 +259,7 @@ fn load_gltf_inner(bytes: &[u8], source: &str, base_dir: Option<&Path>) -> Resul
 
 /// Checks the GLB header ourselves (a `length` below 12 overflows inside
 /// `gltf`), with clearer messages for truncated files.
-fn check_glb_header(bytes: &[u8], source: &str) -> Result<()> {
+pub(crate) fn check_glb_header(bytes: &[u8], source: &str) -> Result<()> {
     if !bytes.starts_with(b"glTF") {
         return Ok(());
     }
@@ -301,7 +301,7 @@ fn check_glb_header(bytes: &[u8], source: &str) -> Result<()> {
 }
 
 /// Formats a `gltf` crate error, keeping long validation reports short.
-fn gltf_error(source: &str, e: gltf::Error) -> Error {
+pub(crate) fn gltf_error(source: &str, e: gltf::Error) -> Error {
     match e {
         gltf::Error::Validation(errors) => {
             let shown: Vec<String> = errors
@@ -324,7 +324,19 @@ fn gltf_error(source: &str, e: gltf::Error) -> Error {
 
 /// Checks what `gltf`'s own validation would panic on, and handles
 /// `extensionsRequired`, before running that validation.
-fn precheck_root(root: &mut gltf::json::Root, source: &str) -> Result<()> {
+pub(crate) fn precheck_root(root: &mut gltf::json::Root, source: &str) -> Result<()> {
+    precheck_root_with(root, source, false)
+}
+
+/// [`precheck_root`]; with `keep_base_color`, materials, base colour
+/// textures, their images and samplers are kept (every other texture slot
+/// is cleared, and a base colour texture without a usable `source`, such as
+/// a KTX2-only one, is dropped from its material).
+pub(crate) fn precheck_root_with(
+    root: &mut gltf::json::Root,
+    source: &str,
+    keep_base_color: bool,
+) -> Result<()> {
     use gltf::json::mesh::Semantic;
     use gltf::json::validation::Checked;
 
@@ -356,13 +368,45 @@ fn precheck_root(root: &mut gltf::json::Root, source: &str) -> Result<()> {
     // KTX2-only texture (no `source`) or a broken image then cannot reject
     // a scene whose geometry is fine.
     root.extensions_required.clear();
-    root.materials.clear();
-    root.textures.clear();
-    root.images.clear();
-    root.samplers.clear();
-    for mesh in &mut root.meshes {
-        for prim in &mut mesh.primitives {
-            prim.material = None;
+    if keep_base_color {
+        let (textures, images, samplers, materials) = (
+            root.textures.len(),
+            root.images.len(),
+            root.samplers.len(),
+            root.materials.len(),
+        );
+        let usable: Vec<bool> = root
+            .textures
+            .iter()
+            .map(|t| t.source.value() < images && t.sampler.is_none_or(|s| s.value() < samplers))
+            .collect();
+        for m in &mut root.materials {
+            m.normal_texture = None;
+            m.occlusion_texture = None;
+            m.emissive_texture = None;
+            m.pbr_metallic_roughness.metallic_roughness_texture = None;
+            if let Some(t) = &m.pbr_metallic_roughness.base_color_texture
+                && (t.index.value() >= textures || !usable[t.index.value()])
+            {
+                m.pbr_metallic_roughness.base_color_texture = None;
+            }
+        }
+        for mesh in &mut root.meshes {
+            for prim in &mut mesh.primitives {
+                if prim.material.is_some_and(|m| m.value() >= materials) {
+                    prim.material = None;
+                }
+            }
+        }
+    } else {
+        root.materials.clear();
+        root.textures.clear();
+        root.images.clear();
+        root.samplers.clear();
+        for mesh in &mut root.meshes {
+            for prim in &mut mesh.primitives {
+                prim.material = None;
+            }
         }
     }
 
@@ -386,7 +430,7 @@ fn precheck_root(root: &mut gltf::json::Root, source: &str) -> Result<()> {
 }
 
 /// Resolves every buffer to its bytes, cut to the declared `byteLength`.
-fn resolve_buffers<'a>(
+pub(crate) fn resolve_buffers<'a>(
     doc: &gltf::Document,
     blob: Option<&'a [u8]>,
     source: &str,
@@ -428,7 +472,7 @@ fn resolve_buffers<'a>(
 
 /// Reads a buffer URI: a base64 `data:` URI, or (with a base directory) a
 /// relative file path inside it.
-fn read_uri(uri: &str, what: &str, base_dir: Option<&Path>) -> Result<Vec<u8>> {
+pub(crate) fn read_uri(uri: &str, what: &str, base_dir: Option<&Path>) -> Result<Vec<u8>> {
     if let Some(rest) = strip_prefix_ignore_case(uri, "data:") {
         return decode_data_uri(rest, what);
     }
@@ -572,7 +616,7 @@ fn shorten(s: &str) -> String {
 /// Walks the default scene depth-first in pre-order, children in array
 /// order, without recursion; returns the nodes that carry a mesh with their
 /// world transforms.
-fn walk_scene(doc: &gltf::Document, source: &str) -> Result<Vec<Instance>> {
+pub(crate) fn walk_scene(doc: &gltf::Document, source: &str) -> Result<Vec<Instance>> {
     const UNVISITED: usize = usize::MAX;
     const ROOT: usize = usize::MAX - 1;
 
@@ -723,7 +767,7 @@ fn transform_box(world: &DAffine3, min: DVec3, max: DVec3) -> (DVec3, DVec3) {
 }
 
 /// The checked location of an accessor's elements in a resolved buffer.
-struct AccessorBytes<'b> {
+pub(crate) struct AccessorBytes<'b> {
     /// The buffer view's bytes.
     view: &'b [u8],
     /// Byte offset of element 0 within `view`.
@@ -731,12 +775,12 @@ struct AccessorBytes<'b> {
     /// Bytes from one element to the next.
     stride: usize,
     /// Number of elements.
-    count: usize,
+    pub(crate) count: usize,
 }
 
 impl AccessorBytes<'_> {
     /// The bytes of element `k` (`k < count`), starting at its first byte.
-    fn element(&self, k: usize) -> &[u8] {
+    pub(crate) fn element(&self, k: usize) -> &[u8] {
         &self.view[self.offset + k * self.stride..]
     }
 }
@@ -745,7 +789,7 @@ impl AccessorBytes<'_> {
 /// no sparse storage, `count ≥ 1`, a buffer view, a stride of at least the
 /// element size and at most 252, and every element inside the view and the
 /// view inside its buffer.
-fn checked_accessor<'b>(
+pub(crate) fn checked_accessor<'b>(
     acc: &gltf::Accessor,
     buffers: &'b [Cow<'_, [u8]>],
     what: &str,
@@ -913,7 +957,7 @@ fn mesh_info(mesh: &gltf::Mesh, buffers: &[Cow<'_, [u8]>], source: &str) -> Resu
 }
 
 /// An accessor's type as glTF spells it, e.g. `VEC3 FLOAT`.
-fn type_name(acc: &gltf::Accessor) -> String {
+pub(crate) fn type_name(acc: &gltf::Accessor) -> String {
     let dims = match acc.dimensions() {
         Dimensions::Scalar => "SCALAR",
         Dimensions::Vec2 => "VEC2",
@@ -936,7 +980,7 @@ fn type_name(acc: &gltf::Accessor) -> String {
 
 /// Validates an indices accessor (SCALAR of U8/U16/U32) and that every index
 /// is below `vertices`; returns the index count.
-fn check_indices(
+pub(crate) fn check_indices(
     idx: &gltf::Accessor,
     buffers: &[Cow<'_, [u8]>],
     vertices: usize,

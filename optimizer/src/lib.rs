@@ -11,16 +11,19 @@
 
 #![deny(missing_docs)]
 
+pub mod bake;
 pub mod candidates;
 pub mod citygen;
 pub mod cost;
 pub mod error;
 pub mod evaluate;
 pub mod geom;
+pub mod geometry;
 pub mod glb;
 pub mod gltf_load;
 pub mod greedy;
 pub mod hierarchy;
+pub mod image_eval;
 pub mod impostor_model;
 pub mod job;
 pub mod pipeline;

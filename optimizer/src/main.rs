@@ -5,10 +5,10 @@ use std::process::ExitCode;
 
 use clap::{Parser, Subcommand};
 use optimizer::evaluate::{EvalOptions, evaluate};
-use optimizer::job::Job;
+use optimizer::job::{Job, MemoryParams};
 use optimizer::pipeline::{PlaceOptions, place};
 use optimizer::placement::Placement;
-use optimizer::{Error, Result, citygen, gltf_load, schema};
+use optimizer::{Error, Result, bake, citygen, geometry, gltf_load, image_eval, schema};
 
 /// Automatic impostor placement for guaranteed frame rates and low memory.
 #[derive(Parser)]
@@ -63,6 +63,41 @@ enum Command {
         /// Seed of the view sampler.
         #[arg(long, default_value_t = 1)]
         seed: u64,
+        /// Worker threads (default: all cores).
+        #[arg(long)]
+        threads: Option<usize>,
+        /// Also render this many views in CPVs with impostors twice (all
+        /// geometry; geometry with the impostors) and report the image error.
+        #[arg(long, default_value_t = 0)]
+        images: u32,
+        /// Baked impostors (GLB from `bake`) for --images; default: bake in memory.
+        #[arg(long)]
+        impostors: Option<PathBuf>,
+        /// Per-channel colour tolerance (0–255) of the image mismatch test.
+        #[arg(long, default_value_t = 24)]
+        tolerance: u8,
+        /// Write the worst view's renders side by side as a PNG into this directory.
+        #[arg(long)]
+        dump: Option<PathBuf>,
+    },
+    /// Render a placement's impostors into layered, alpha-masked quads and
+    /// write them as one GLB with texture atlases.
+    Bake {
+        /// Scene with geometry: .glb or .gltf (a JSON scene summary has none).
+        scene: PathBuf,
+        /// Placement JSON written by `place` for this scene.
+        #[arg(long)]
+        placement: PathBuf,
+        /// Job JSON (its memory model is used for the baked-memory report;
+        /// default: the reference memory model).
+        #[arg(long)]
+        job: Option<PathBuf>,
+        /// Output GLB.
+        #[arg(short, long)]
+        out: PathBuf,
+        /// Write the bake report (layers, atlases, texels, memory) to this JSON file.
+        #[arg(long)]
+        report: Option<PathBuf>,
         /// Worker threads (default: all cores).
         #[arg(long)]
         threads: Option<usize>,
@@ -147,6 +182,30 @@ fn set_threads(threads: Option<usize>) -> Result<()> {
     Ok(())
 }
 
+/// The worst view's two renders side by side (geometry left, impostors
+/// right) with a 4-pixel gap, as PNG.
+fn side_by_side_png(pair: &image_eval::ImagePair) -> Result<Vec<u8>> {
+    let (w, h, gap) = (pair.width as usize, pair.height as usize, 4usize);
+    let out_w = 2 * w + gap;
+    let mut out = vec![255u8; out_w * h * 4];
+    for y in 0..h {
+        let row = &mut out[y * out_w * 4..(y + 1) * out_w * 4];
+        row[..w * 4].copy_from_slice(&pair.geometry[y * w * 4..(y + 1) * w * 4]);
+        row[(w + gap) * 4..].copy_from_slice(&pair.impostors[y * w * 4..(y + 1) * w * 4]);
+    }
+    bake::encode_png(&out, out_w as u32, h as u32)
+}
+
+fn read_placement(path: &Path) -> Result<Placement> {
+    let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+    serde_json::from_slice(&bytes).map_err(|e| {
+        Error::bad(
+            path.display().to_string(),
+            format!("invalid placement JSON: {e}"),
+        )
+    })
+}
+
 fn json(value: &impl serde::Serialize) -> Result<Vec<u8>> {
     optimizer::to_json_bytes(value)
 }
@@ -201,15 +260,48 @@ fn run(cli: Cli) -> Result<ExitCode> {
             views,
             seed,
             threads,
+            images,
+            impostors,
+            tolerance,
+            dump,
         } => {
             set_threads(threads)?;
             let job = read_job(&job)?;
-            let scene = gltf_load::load_scene_file(&scene)?;
-            let bytes = std::fs::read(&placement).map_err(|e| Error::io(&placement, e))?;
+            let scene_path = scene;
+            let scene = gltf_load::load_scene_file(&scene_path)?;
             let name = placement.display().to_string();
-            let p: Placement = serde_json::from_slice(&bytes)
-                .map_err(|e| Error::bad(&name, format!("invalid placement JSON: {e}")))?;
-            let eval = evaluate(&scene, &job, &p, &EvalOptions { views, seed }, &name)?;
+            let p = read_placement(&placement)?;
+            let mut eval = evaluate(&scene, &job, &p, &EvalOptions { views, seed }, &name)?;
+            if images > 0 {
+                let geom = geometry::load_geometry_file(&scene_path)?;
+                let layers = match &impostors {
+                    Some(path) => {
+                        let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+                        bake::read_layers(&bytes, &path.display().to_string())?
+                    }
+                    None => bake::render_layers(&geom, &p, &name)?,
+                };
+                let opts = image_eval::ImageOptions {
+                    views: images,
+                    seed,
+                    tolerance,
+                };
+                let (report, pair) = image_eval::image_error(&geom, &job, &p, &layers, &opts)?;
+                eprintln!(
+                    "{} image views: PSNR mean {:.2} dB (min {:.2}), mismatch mean {:.4} (max {:.4})",
+                    report.views,
+                    report.psnr_db.mean,
+                    report.psnr_db.min,
+                    report.mismatch_fraction.mean,
+                    report.mismatch_fraction.max
+                );
+                if let (Some(dir), Some(pair)) = (&dump, pair) {
+                    std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
+                    let png = side_by_side_png(&pair)?;
+                    write_output(Some(&dir.join("worst_view.png")), &png)?;
+                }
+                eval.image = Some(report);
+            }
             write_output(out.as_deref(), &json(&eval)?)?;
             eprintln!(
                 "{} views: max {:.3} ms, p99 {:.3} ms, {} violations ({} in solved)",
@@ -222,6 +314,47 @@ fn run(cli: Cli) -> Result<ExitCode> {
                     ExitCode::SUCCESS
                 },
             )
+        }
+        Command::Bake {
+            scene,
+            placement,
+            job,
+            out,
+            report,
+            threads,
+        } => {
+            set_threads(threads)?;
+            let memory = match job {
+                Some(j) => read_job(&j)?.memory,
+                None => MemoryParams::default(),
+            };
+            let p = read_placement(&placement)?;
+            let geom = geometry::load_geometry_file(&scene)?;
+            let start = std::time::Instant::now();
+            let (glb, rep) = bake::bake(
+                &geom,
+                &memory,
+                &p,
+                &bake::BakeOptions::default(),
+                &placement.display().to_string(),
+            )?;
+            write_output(Some(&out), &glb)?;
+            if let Some(r) = report {
+                write_output(Some(&r), &json(&rep)?)?;
+            }
+            eprintln!(
+                "{} impostors, {} of {} layers written, {} atlases, {} texels, {:.3} MB baked \
+                 (placement estimate {:.3} MB), {:.1} s",
+                rep.impostors,
+                rep.layers_written,
+                rep.layers,
+                rep.atlases,
+                rep.texels,
+                rep.memory_bytes as f64 / 1e6,
+                rep.placement_memory_bytes as f64 / 1e6,
+                start.elapsed().as_secs_f64()
+            );
+            Ok(ExitCode::SUCCESS)
         }
         Command::GenCity {
             seed,

@@ -1,0 +1,589 @@
+//! Scene geometry for rendering: triangles, normals, texture coordinates and
+//! base-colour materials of a glTF scene, read with the same safety rules and
+//! the same object ids as [`crate::gltf_load`] (which reads bounds only).
+//!
+//! Every mesh primitive with triangles is read once, however often it is
+//! instanced; an [`Instance`] places it in the world for one object. Object
+//! ids follow the default scene's depth-first pre-order walk, so they match
+//! the ids of [`crate::scene::Scene`] built from the same file.
+//!
+//! Base colour images (PNG, JPEG) are decoded to RGBA8 with their size
+//! checked before decoding (at most [`MAX_IMAGE_SIDE`] per side). An image in
+//! another format (e.g. KTX2) or that fails to decode is an error naming it.
+//! `KHR_texture_transform` is ignored; only `TEXCOORD_0` is read.
+
+use std::borrow::Cow;
+use std::io::Cursor;
+use std::path::Path;
+
+use base64::Engine;
+use glam::{DAffine3, Vec2, Vec3};
+use gltf::accessor::{DataType, Dimensions};
+use gltf::mesh::Mode;
+
+use crate::gltf_load::{
+    AccessorBytes, check_glb_header, check_indices, checked_accessor, gltf_error, guarded,
+    precheck_root_with, read_uri, resolve_buffers, type_name, walk_scene,
+};
+use crate::{Error, Result};
+
+/// The largest decoded image side, texels.
+pub const MAX_IMAGE_SIDE: u32 = 8192;
+
+/// A scene's renderable geometry.
+#[derive(Clone, Debug, Default)]
+pub struct SceneGeometry {
+    /// Distinct triangle primitives.
+    pub meshes: Vec<MeshData>,
+    /// Placements of meshes, one per (object, primitive with triangles).
+    pub instances: Vec<Instance>,
+    /// Materials: the glTF materials by index, then a default material.
+    pub materials: Vec<Material>,
+    /// Decoded base colour images.
+    pub textures: Vec<Texture>,
+    /// Number of objects (nodes with a mesh), as in the scene.
+    pub objects: usize,
+}
+
+/// One triangle primitive in its local space.
+#[derive(Clone, Debug, Default)]
+pub struct MeshData {
+    /// Positions.
+    pub positions: Vec<Vec3>,
+    /// Unit normals, one per position (computed when the file has none).
+    pub normals: Vec<Vec3>,
+    /// `TEXCOORD_0`, one per position, or empty.
+    pub uvs: Vec<Vec2>,
+    /// Triangle list.
+    pub indices: Vec<u32>,
+    /// Index into [`SceneGeometry::materials`].
+    pub material: u32,
+}
+
+/// A mesh placed for an object.
+#[derive(Clone, Copy, Debug)]
+pub struct Instance {
+    /// Object id.
+    pub object: u32,
+    /// Index into [`SceneGeometry::meshes`].
+    pub mesh: u32,
+    /// Local to world.
+    pub transform: DAffine3,
+}
+
+/// How a material treats alpha.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum AlphaMode {
+    /// Alpha ignored.
+    Opaque,
+    /// Discard below the cutoff.
+    Mask(f32),
+    /// Blended.
+    Blend,
+}
+
+/// A base-colour material.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Material {
+    /// Linear RGBA factor.
+    pub base_color: [f32; 4],
+    /// Index into [`SceneGeometry::textures`].
+    pub base_color_texture: Option<u32>,
+    /// Alpha mode.
+    pub alpha_mode: AlphaMode,
+    /// Back faces drawn.
+    pub double_sided: bool,
+}
+
+impl Default for Material {
+    fn default() -> Self {
+        Material {
+            base_color: [1.0; 4],
+            base_color_texture: None,
+            alpha_mode: AlphaMode::Opaque,
+            double_sided: false,
+        }
+    }
+}
+
+/// A decoded texture with its sampler's wrapping.
+#[derive(Clone, Debug)]
+pub struct Texture {
+    /// Width, texels.
+    pub width: u32,
+    /// Height, texels.
+    pub height: u32,
+    /// RGBA8 (sRGB colour), rows from the top.
+    pub rgba: Vec<u8>,
+    /// Wrapping of `u`.
+    pub wrap_s: crate::raster::Wrap,
+    /// Wrapping of `v`.
+    pub wrap_t: crate::raster::Wrap,
+}
+
+impl SceneGeometry {
+    /// Number of objects (nodes with a mesh).
+    pub fn object_count(&self) -> usize {
+        self.objects
+    }
+
+    /// Triangles over all instances.
+    pub fn triangle_count(&self) -> u64 {
+        self.instances
+            .iter()
+            .map(|i| self.meshes[i.mesh as usize].indices.len() as u64 / 3)
+            .sum()
+    }
+}
+
+/// Loads the geometry of a `.glb` / `.gltf` file (relative resources next to
+/// it). A JSON scene summary has no geometry: that is an error.
+pub fn load_geometry_file(path: &Path) -> Result<SceneGeometry> {
+    let source = path.display().to_string();
+    let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+    let base_dir = match path.parent() {
+        Some(p) if p.as_os_str().is_empty() => Path::new("."),
+        Some(p) => p,
+        None => Path::new("."),
+    };
+    load(&bytes, &source, Some(base_dir))
+}
+
+/// Loads the geometry of uploaded bytes (GLB or glTF JSON with embedded
+/// resources; no external URIs).
+pub fn load_geometry_bytes(bytes: &[u8], source: &str) -> Result<SceneGeometry> {
+    load(bytes, source, None)
+}
+
+fn load(bytes: &[u8], source: &str, base_dir: Option<&Path>) -> Result<SceneGeometry> {
+    if !bytes.starts_with(b"glTF") {
+        #[derive(serde::Deserialize)]
+        struct Probe {
+            #[serde(default)]
+            objects: Option<serde::de::IgnoredAny>,
+        }
+        if let Ok(Probe { objects: Some(_) }) = serde_json::from_slice::<Probe>(bytes) {
+            return Err(Error::bad(
+                source,
+                "a JSON scene summary has no geometry (bounds and costs only); use the .glb or .gltf scene",
+            ));
+        }
+    }
+    guarded(source, || load_inner(bytes, source, base_dir))
+}
+
+fn load_inner(bytes: &[u8], source: &str, base_dir: Option<&Path>) -> Result<SceneGeometry> {
+    if bytes.starts_with(b"glTF") {
+        check_glb_header(bytes, source)?;
+    }
+    let gltf::Gltf { document, blob } =
+        gltf::Gltf::from_slice_without_validation(bytes).map_err(|e| gltf_error(source, e))?;
+    let mut root = document.into_json();
+    precheck_root_with(&mut root, source, true)?;
+    let doc = gltf::Document::from_json(root).map_err(|e| gltf_error(source, e))?;
+    let buffers = resolve_buffers(&doc, blob.as_deref(), source, base_dir)?;
+    let scene_instances = walk_scene(&doc, source)?;
+
+    // Textures used as base colour, decoded once per image.
+    let mut textures = Vec::new();
+    let mut texture_of: Vec<Option<u32>> = vec![None; doc.textures().len()];
+    let mut materials = Vec::with_capacity(doc.materials().len() + 1);
+    for m in doc.materials() {
+        let pbr = m.pbr_metallic_roughness();
+        let mut tex = None;
+        if let Some(info) = pbr.base_color_texture() {
+            let t = info.texture();
+            if texture_of[t.index()].is_none() {
+                let what = format!(
+                    "{source}: texture {} image {}",
+                    t.index(),
+                    t.source().index()
+                );
+                let (width, height, rgba) = decode_image(&t.source(), &buffers, base_dir, &what)?;
+                let s = t.sampler();
+                textures.push(Texture {
+                    width,
+                    height,
+                    rgba,
+                    wrap_s: wrap(s.wrap_s()),
+                    wrap_t: wrap(s.wrap_t()),
+                });
+                texture_of[t.index()] = Some(textures.len() as u32 - 1);
+            }
+            tex = texture_of[t.index()];
+        }
+        materials.push(Material {
+            base_color: pbr.base_color_factor(),
+            base_color_texture: tex,
+            alpha_mode: match m.alpha_mode() {
+                gltf::material::AlphaMode::Opaque => AlphaMode::Opaque,
+                gltf::material::AlphaMode::Mask => AlphaMode::Mask(m.alpha_cutoff().unwrap_or(0.5)),
+                gltf::material::AlphaMode::Blend => AlphaMode::Blend,
+            },
+            double_sided: m.double_sided(),
+        });
+    }
+    let default_material = materials.len() as u32;
+    materials.push(Material::default());
+
+    // Every used mesh's triangle primitives, read once.
+    let gmeshes: Vec<gltf::Mesh> = doc.meshes().collect();
+    let mut mesh_prims: Vec<Option<Vec<u32>>> = vec![None; gmeshes.len()];
+    let mut meshes = Vec::new();
+    let mut instances = Vec::new();
+    for (object, inst) in scene_instances.iter().enumerate() {
+        if mesh_prims[inst.mesh].is_none() {
+            let mut ids = Vec::new();
+            for prim in gmeshes[inst.mesh].primitives() {
+                let what = format!("{source}: mesh {} primitive {}", inst.mesh, prim.index());
+                if let Some(mut data) = read_primitive(&prim, &buffers, &what)? {
+                    data.material = prim
+                        .material()
+                        .index()
+                        .map_or(default_material, |i| i as u32);
+                    meshes.push(data);
+                    ids.push(meshes.len() as u32 - 1);
+                }
+            }
+            mesh_prims[inst.mesh] = Some(ids);
+        }
+        for &mesh in mesh_prims[inst.mesh].as_deref().unwrap_or_default() {
+            instances.push(Instance {
+                object: object as u32,
+                mesh,
+                transform: inst.world,
+            });
+        }
+    }
+    Ok(SceneGeometry {
+        meshes,
+        instances,
+        materials,
+        textures,
+        objects: scene_instances.len(),
+    })
+}
+
+fn wrap(m: gltf::texture::WrappingMode) -> crate::raster::Wrap {
+    use crate::raster::Wrap;
+    match m {
+        gltf::texture::WrappingMode::ClampToEdge => Wrap::ClampToEdge,
+        gltf::texture::WrappingMode::MirroredRepeat => Wrap::MirroredRepeat,
+        gltf::texture::WrappingMode::Repeat => Wrap::Repeat,
+    }
+}
+
+/// The bytes of an image: a buffer view, a base64 `data:` URI or (for local
+/// files) a relative path; decoded to RGBA8 with its size checked first.
+fn decode_image(
+    image: &gltf::Image,
+    buffers: &[Cow<'_, [u8]>],
+    base_dir: Option<&Path>,
+    what: &str,
+) -> Result<(u32, u32, Vec<u8>)> {
+    let bytes: Cow<[u8]> = match image.source() {
+        gltf::image::Source::View { view, .. } => {
+            let data = buffers
+                .get(view.buffer().index())
+                .ok_or_else(|| Error::bad(what, "its buffer is missing"))?;
+            let (start, len) = (view.offset(), view.length());
+            match start.checked_add(len) {
+                Some(end) if end <= data.len() => Cow::Borrowed(&data[start..end]),
+                _ => return Err(Error::bad(what, "its bufferView lies outside its buffer")),
+            }
+        }
+        gltf::image::Source::Uri { uri, .. } => {
+            if let Some(rest) = uri.strip_prefix("data:") {
+                let (header, payload) = rest
+                    .split_once(',')
+                    .ok_or_else(|| Error::bad(what, "data: URI has no `,`"))?;
+                if !header.to_ascii_lowercase().ends_with(";base64") {
+                    return Err(Error::bad(what, "data: URI is not base64-encoded"));
+                }
+                const ENGINE: base64::engine::GeneralPurpose = base64::engine::GeneralPurpose::new(
+                    &base64::alphabet::STANDARD,
+                    base64::engine::GeneralPurposeConfig::new()
+                        .with_decode_padding_mode(base64::engine::DecodePaddingMode::Indifferent)
+                        .with_decode_allow_trailing_bits(true),
+                );
+                Cow::Owned(
+                    ENGINE.decode(payload.trim()).map_err(|e| {
+                        Error::bad(what, format!("data: URI is not valid base64: {e}"))
+                    })?,
+                )
+            } else {
+                Cow::Owned(read_uri(uri, what, base_dir)?)
+            }
+        }
+    };
+    let reader = image::ImageReader::new(Cursor::new(&*bytes))
+        .with_guessed_format()
+        .map_err(|e| Error::bad(what, format!("unreadable image: {e}")))?;
+    if reader.format().is_none() {
+        return Err(Error::bad(
+            what,
+            "not a PNG or JPEG image (other formats such as KTX2 are not supported)",
+        ));
+    }
+    let (w, h) = reader
+        .into_dimensions()
+        .map_err(|e| Error::bad(what, format!("unreadable image header: {e}")))?;
+    if w == 0 || h == 0 || w > MAX_IMAGE_SIDE || h > MAX_IMAGE_SIDE {
+        return Err(Error::bad(
+            what,
+            format!("image size {w} × {h} is outside 1 … {MAX_IMAGE_SIDE} per side"),
+        ));
+    }
+    let mut reader = image::ImageReader::new(Cursor::new(&*bytes))
+        .with_guessed_format()
+        .map_err(|e| Error::bad(what, format!("unreadable image: {e}")))?;
+    let mut limits = image::Limits::default();
+    limits.max_image_width = Some(MAX_IMAGE_SIDE);
+    limits.max_image_height = Some(MAX_IMAGE_SIDE);
+    limits.max_alloc = Some(512 * 1024 * 1024);
+    reader.limits(limits);
+    let img = reader
+        .decode()
+        .map_err(|e| Error::bad(what, format!("the image does not decode: {e}")))?;
+    let rgba = img.to_rgba8();
+    Ok((rgba.width(), rgba.height(), rgba.into_raw()))
+}
+
+/// Reads a float attribute of `n` components per element (normalized
+/// unsigned byte/short texture coordinates are converted).
+fn read_floats<const N: usize>(
+    acc: &gltf::Accessor,
+    buffers: &[Cow<'_, [u8]>],
+    what: &str,
+    dims: Dimensions,
+) -> Result<Vec<[f32; N]>> {
+    let ok_type = acc.dimensions() == dims
+        && (acc.data_type() == DataType::F32
+            || (acc.normalized() && matches!(acc.data_type(), DataType::U8 | DataType::U16)));
+    if !ok_type {
+        return Err(Error::bad(
+            what,
+            format!(
+                "accessor {} has unsupported type {}",
+                acc.index(),
+                type_name(acc)
+            ),
+        ));
+    }
+    let data: AccessorBytes = checked_accessor(acc, buffers, what)?;
+    let mut out = Vec::with_capacity(data.count);
+    for k in 0..data.count {
+        let e = data.element(k);
+        let mut v = [0f32; N];
+        for (i, c) in v.iter_mut().enumerate() {
+            *c = match acc.data_type() {
+                DataType::F32 => {
+                    f32::from_le_bytes([e[4 * i], e[4 * i + 1], e[4 * i + 2], e[4 * i + 3]])
+                }
+                DataType::U8 => f32::from(e[i]) / 255.0,
+                _ => f32::from(u16::from_le_bytes([e[2 * i], e[2 * i + 1]])) / 65535.0,
+            };
+            if !c.is_finite() {
+                return Err(Error::bad(what, format!("element {k} is not finite")));
+            }
+        }
+        out.push(v);
+    }
+    Ok(out)
+}
+
+/// Reads one primitive as a triangle list; `None` for points and lines.
+fn read_primitive(
+    prim: &gltf::Primitive,
+    buffers: &[Cow<'_, [u8]>],
+    what: &str,
+) -> Result<Option<MeshData>> {
+    if matches!(
+        prim.mode(),
+        Mode::Points | Mode::Lines | Mode::LineLoop | Mode::LineStrip
+    ) {
+        return Ok(None);
+    }
+    let pos_acc = prim
+        .get(&gltf::Semantic::Positions)
+        .ok_or_else(|| Error::bad(format!("{what} POSITION"), "is missing"))?;
+    if pos_acc.data_type() != DataType::F32 {
+        return Err(Error::bad(
+            format!("{what} POSITION"),
+            format!(
+                "accessor {} is {}, expected VEC3 FLOAT",
+                pos_acc.index(),
+                type_name(&pos_acc)
+            ),
+        ));
+    }
+    let positions: Vec<Vec3> = read_floats::<3>(
+        &pos_acc,
+        buffers,
+        &format!("{what} POSITION"),
+        Dimensions::Vec3,
+    )?
+    .into_iter()
+    .map(Vec3::from_array)
+    .collect();
+    let n = positions.len();
+    let elements: Vec<u32> = match prim.indices() {
+        None => (0..n as u32).collect(),
+        Some(idx) => {
+            let w = format!("{what} indices");
+            check_indices(&idx, buffers, n, &w)?;
+            let data = checked_accessor(&idx, buffers, &w)?;
+            (0..data.count)
+                .map(|k| {
+                    let e = data.element(k);
+                    match idx.data_type() {
+                        DataType::U8 => u32::from(e[0]),
+                        DataType::U16 => u32::from(u16::from_le_bytes([e[0], e[1]])),
+                        _ => u32::from_le_bytes([e[0], e[1], e[2], e[3]]),
+                    }
+                })
+                .collect()
+        }
+    };
+    let indices: Vec<u32> = match prim.mode() {
+        Mode::TriangleStrip => (0..elements.len().saturating_sub(2))
+            .flat_map(|i| {
+                if i % 2 == 0 {
+                    [elements[i], elements[i + 1], elements[i + 2]]
+                } else {
+                    [elements[i + 1], elements[i], elements[i + 2]]
+                }
+            })
+            .collect(),
+        Mode::TriangleFan => (1..elements.len().saturating_sub(1))
+            .flat_map(|i| [elements[0], elements[i], elements[i + 1]])
+            .collect(),
+        _ => elements[..elements.len() / 3 * 3].to_vec(),
+    };
+    let normals = match prim.get(&gltf::Semantic::Normals) {
+        Some(acc) => {
+            let w = format!("{what} NORMAL");
+            let v = read_floats::<3>(&acc, buffers, &w, Dimensions::Vec3)?;
+            if v.len() != n {
+                return Err(Error::bad(
+                    w,
+                    format!("has {} elements for {n} positions", v.len()),
+                ));
+            }
+            v.into_iter()
+                .map(|a| Vec3::from_array(a).normalize_or_zero())
+                .collect()
+        }
+        None => smooth_normals(&positions, &indices),
+    };
+    let uvs = match prim.get(&gltf::Semantic::TexCoords(0)) {
+        Some(acc) => {
+            let w = format!("{what} TEXCOORD_0");
+            let v = read_floats::<2>(&acc, buffers, &w, Dimensions::Vec2)?;
+            if v.len() != n {
+                return Err(Error::bad(
+                    w,
+                    format!("has {} elements for {n} positions", v.len()),
+                ));
+            }
+            v.into_iter().map(Vec2::from_array).collect()
+        }
+        None => Vec::new(),
+    };
+    Ok(Some(MeshData {
+        positions,
+        normals,
+        uvs,
+        indices,
+        material: 0,
+    }))
+}
+
+/// Area-weighted vertex normals.
+fn smooth_normals(positions: &[Vec3], indices: &[u32]) -> Vec<Vec3> {
+    let mut n = vec![Vec3::ZERO; positions.len()];
+    for t in indices.chunks_exact(3) {
+        let [a, b, c] = [t[0], t[1], t[2]].map(|i| positions[i as usize]);
+        let f = (b - a).cross(c - a);
+        for &i in t {
+            n[i as usize] += f;
+        }
+    }
+    n.into_iter().map(Vec3::normalize_or_zero).collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::citygen::{CityParams, generate};
+    use crate::gltf_load::load_scene_bytes;
+
+    #[test]
+    fn city_geometry_matches_the_scene() {
+        let glb = generate(&CityParams {
+            seed: 2,
+            scale: 0.05,
+        })
+        .unwrap();
+        let scene = load_scene_bytes(&glb, "city").unwrap();
+        let geom = load_geometry_bytes(&glb, "city").unwrap();
+        assert_eq!(geom.object_count(), scene.objects.len());
+        assert_eq!(geom.triangle_count(), scene.total_triangles());
+        let mut lo = vec![glam::DVec3::splat(f64::INFINITY); scene.objects.len()];
+        let mut hi = vec![glam::DVec3::splat(f64::NEG_INFINITY); scene.objects.len()];
+        for inst in &geom.instances {
+            for p in &geom.meshes[inst.mesh as usize].positions {
+                let w = inst.transform.transform_point3(p.as_dvec3());
+                lo[inst.object as usize] = lo[inst.object as usize].min(w);
+                hi[inst.object as usize] = hi[inst.object as usize].max(w);
+            }
+        }
+        // The scene's bounds are the box of the transformed local box, so
+        // they contain the transformed vertices; triangles agree per object.
+        let mut tris = vec![0u64; scene.objects.len()];
+        for inst in &geom.instances {
+            tris[inst.object as usize] += geom.meshes[inst.mesh as usize].indices.len() as u64 / 3;
+        }
+        for (o, ob) in scene.objects.iter().enumerate() {
+            assert!(lo[o].cmpge(ob.min - 1e-3).all(), "object {o}");
+            assert!(hi[o].cmple(ob.max + 1e-3).all(), "object {o}");
+            assert_eq!(tris[o], ob.triangles, "object {o}");
+        }
+        // Instanced meshes are stored once.
+        assert!(geom.meshes.len() < geom.instances.len());
+        for m in &geom.meshes {
+            assert_eq!(m.normals.len(), m.positions.len());
+            assert!(m.indices.iter().all(|&i| (i as usize) < m.positions.len()));
+        }
+    }
+
+    #[test]
+    fn summaries_have_no_geometry() {
+        let e = load_geometry_bytes(br#"{"objects": []}"#, "s.json").unwrap_err();
+        assert!(e.to_string().contains("no geometry"), "{e}");
+    }
+
+    #[test]
+    fn corrupt_bytes_never_panic() {
+        let glb = generate(&CityParams {
+            seed: 1,
+            scale: 0.01,
+        })
+        .unwrap();
+        let mut rng = crate::rng::Rng::new(7);
+        for _ in 0..200 {
+            let mut b = glb.clone();
+            let i = (rng.next_u64() % b.len() as u64) as usize;
+            b[i] ^= 1 << (rng.next_u64() % 8);
+            let _ = load_geometry_bytes(&b, "x.glb");
+        }
+        let _ = load_geometry_bytes(&glb[..glb.len() / 2], "x.glb").unwrap_err();
+    }
+
+    #[test]
+    fn strips_fans_and_computed_normals() {
+        let p = [Vec3::ZERO, Vec3::X, Vec3::Y, Vec3::new(1.0, 1.0, 0.0)];
+        let n = smooth_normals(&p, &[0, 1, 2, 1, 3, 2]);
+        assert!(n.iter().all(|v| (*v - Vec3::Z).length() < 1e-6));
+    }
+}

@@ -1,0 +1,113 @@
+//! Baking impostors end to end: `place` → `bake` → the Khronos glTF
+//! validator → `evaluate --images` against the baked GLB.
+
+use std::process::Command;
+
+use crate::util::*;
+
+/// Runs the Khronos validator (installed by the README's test command with
+/// `npm ci --prefix tools/gltf-validator`) and returns its issues report.
+fn validate(glb: &std::path::Path) -> serde_json::Value {
+    let tool = root().join("tools/gltf-validator");
+    assert!(
+        tool.join("node_modules/gltf-validator").is_dir(),
+        "the glTF validator is not installed: run `npm ci --prefix tools/gltf-validator`"
+    );
+    let o = Command::new("node")
+        .arg(tool.join("validate.js"))
+        .arg(glb)
+        .output()
+        .expect("run node");
+    let report: serde_json::Value = serde_json::from_slice(&o.stdout)
+        .unwrap_or_else(|e| panic!("validator output: {e}: {}", stderr(&o)));
+    report
+}
+
+#[test]
+fn bake_validates_and_looks_like_the_geometry() {
+    let dir = tmp("bake");
+    let city = city("0.1");
+    let job = root().join("fixtures/jobs/city-small.json");
+    let p = dir.join("p.json");
+    let o = place(&city, &job, &p, &[]);
+    assert!(matches!(code(&o), 0 | 3), "{}", stderr(&o));
+    let glb = dir.join("impostors.glb");
+    let report = dir.join("bake.json");
+    let o = run(&[
+        "bake",
+        s(&city),
+        "--placement",
+        s(&p),
+        "--job",
+        s(&job),
+        "-o",
+        s(&glb),
+        "--report",
+        s(&report),
+    ]);
+    assert_eq!(code(&o), 0, "{}", stderr(&o));
+    let rep = read_json(&report);
+    let placement = read_json(&p);
+    assert_eq!(rep["impostors"], placement["summary"]["impostors"]);
+    assert!(rep["layers_written"].as_u64().unwrap() > 0, "{rep}");
+    // Baked memory never exceeds the estimate (empty layers are dropped).
+    assert!(rep["memory_bytes"].as_u64() <= placement["summary"]["memory_bytes"].as_u64());
+
+    let issues = validate(&glb);
+    assert_eq!(issues["numErrors"], 0, "{issues}");
+
+    let eval = dir.join("e.json");
+    let o = run(&[
+        "evaluate",
+        s(&city),
+        "--job",
+        s(&job),
+        "--placement",
+        s(&p),
+        "-o",
+        s(&eval),
+        "--views",
+        "200",
+        "--images",
+        "24",
+        "--impostors",
+        s(&glb),
+        "--dump",
+        s(&dir),
+    ]);
+    assert_eq!(code(&o), 0, "{}", stderr(&o));
+    let e = read_json(&eval);
+    let image = &e["image"];
+    assert_eq!(image["views"], 24, "{image}");
+    let mean = image["mismatch_fraction"]["mean"].as_f64().unwrap();
+    let max = image["mismatch_fraction"]["max"].as_f64().unwrap();
+    assert!(mean <= 0.01, "mean mismatch {mean}: {image}");
+    assert!(max <= 0.05, "worst mismatch {max}: {image}");
+    assert!(dir.join("worst_view.png").exists());
+}
+
+#[test]
+fn bake_rejects_scenes_without_geometry_and_foreign_placements() {
+    let dir = tmp("bake-bad");
+    let job = root().join("fixtures/jobs/city-small.json");
+    let summary = dir.join("city.json");
+    let o = run(&["gen-city", "--scale", "0.1", "--summary", "-o", s(&summary)]);
+    assert_eq!(code(&o), 0);
+    let p = dir.join("p.json");
+    let o = place(&summary, &job, &p, &[]);
+    assert!(matches!(code(&o), 0 | 3), "{}", stderr(&o));
+    let out = dir.join("i.glb");
+    let o = run(&["bake", s(&summary), "--placement", s(&p), "-o", s(&out)]);
+    assert_eq!(code(&o), 2, "{}", stderr(&o));
+    assert!(stderr(&o).contains("no geometry"), "{}", stderr(&o));
+    assert!(!out.exists());
+
+    // A placement for the city baked over a one-object scene.
+    let tiny = dir.join("tiny.glb");
+    let o = run(&["gen-city", "--scale", "0.001", "-o", s(&tiny)]);
+    assert_eq!(code(&o), 0, "{}", stderr(&o));
+    let o = run(&["bake", s(&tiny), "--placement", s(&p), "-o", s(&out)]);
+    assert_eq!(code(&o), 2, "{}", stderr(&o));
+    assert!(stderr(&o).contains("object id"), "{}", stderr(&o));
+    assert!(!out.exists());
+}
