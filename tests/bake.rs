@@ -84,6 +84,13 @@ fn bake_validates_and_looks_like_the_geometry() {
     assert!(mean <= 0.01, "mean mismatch {mean}: {image}");
     assert!(max <= 0.05, "worst mismatch {max}: {image}");
     assert!(dir.join("worst_view.png").exists());
+    // The views really show impostors (few pixels: without visibility
+    // culling many impostors stand behind buildings).
+    let drawn = image["impostor_pixel_fraction"].as_f64().unwrap();
+    assert!(
+        drawn > 0.0,
+        "impostors cover {drawn} of the pixels: {image}"
+    );
 }
 
 #[test]

@@ -4,9 +4,10 @@
 //!
 //! Views are sampled where impostors are used: a CPV that has impostors is
 //! chosen uniformly, then a position uniformly in its region and a direction
-//! uniformly (in cube-face coordinates) in its direction interval, within the
-//! job's pitch range. A view whose CPV has no impostors renders identically
-//! and would only dilute the figures.
+//! in its direction interval (within the job's pitch range) aimed at one of
+//! its impostors as far as the interval allows. A view whose CPV has no
+//! impostors, or that looks away from them, renders identically and would
+//! only dilute the figures.
 //!
 //! Per view: PSNR over RGB, and the mismatch fraction — the share of pixels
 //! whose colour is matched (every channel within `tolerance`) by no pixel of
@@ -104,6 +105,10 @@ pub struct ImageReport {
     pub psnr_db: PsnrSpread,
     /// Share of pixels without a match within one pixel.
     pub mismatch_fraction: MismatchSpread,
+    /// Mean share of pixels drawn by impostor quads (pixels that change when
+    /// the quads are added to the geometry they do not replace): shows that
+    /// the comparison actually looks at impostors.
+    pub impostor_pixel_fraction: f64,
     /// The view with the largest mismatch fraction.
     pub worst_view: Option<WorstView>,
 }
@@ -310,13 +315,14 @@ pub fn image_error(
             mean: 0.0,
             max: 0.0,
         },
+        impostor_pixel_fraction: 0.0,
         worst_view: None,
     };
     if with_impostors.is_empty() || opts.views == 0 {
         return Ok((empty, None));
     }
-    // (mismatch, psnr, view info, images of this view)
-    let results: Vec<(f64, f64, WorstView, ImagePair)> = (0..opts.views)
+    // (mismatch, psnr, view info, images of this view, impostor pixels)
+    let results: Vec<(f64, f64, WorstView, ImagePair, f64)> = (0..opts.views)
         .into_par_iter()
         .filter_map(|i| {
             let mut rng = Rng::new(opts.seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) ^ u64::from(i));
@@ -330,8 +336,23 @@ pub fn image_error(
                     DVec3::from_array(cpv.region.max),
                 );
                 let d = &cpv.directions;
-                let dir =
-                    face_direction(d.face, rng.range(d.u[0], d.u[1]), rng.range(d.v[0], d.v[1]));
+                let (mut u, mut v) = (rng.range(d.u[0], d.u[1]), rng.range(d.v[0], d.v[1]));
+                // Aim at one of the CPV's impostors, as far as the CPV's
+                // direction interval allows.
+                let k = cpv.impostors[(rng.next_u64() % cpv.impostors.len() as u64) as usize];
+                let target = DVec3::from_array(placement.impostors[k as usize].sphere.center) - eye;
+                let axis = usize::from(d.face / 2);
+                let sign = if d.face.is_multiple_of(2) { 1.0 } else { -1.0 };
+                let along = target[axis] * sign;
+                if along > 0.0 {
+                    let others: Vec<f64> = (0..3)
+                        .filter(|&a| a != axis)
+                        .map(|a| target[a] / along)
+                        .collect();
+                    u = others[0].clamp(d.u[0], d.u[1]);
+                    v = others[1].clamp(d.v[0], d.v[1]);
+                }
+                let dir = face_direction(d.face, u, v).normalize();
                 let el = dir.y.clamp(-1.0, 1.0).asin();
                 if el >= pitch[0] - 1e-9 && el <= pitch[1] + 1e-9 {
                     found = Some((c, eye, dir));
@@ -356,8 +377,16 @@ pub fn image_error(
             let mut raster = Raster::new(w, h);
             renderer.render(&mut raster, &view, &frustum, &[], &[]);
             let a = raster.rgba_bytes();
+            renderer.render(&mut raster, &view, &frustum, &skip, &[]);
+            let holes = raster.rgba_bytes();
             renderer.render(&mut raster, &view, &frustum, &skip, &quads);
             let b = raster.rgba_bytes();
+            let drawn = holes
+                .chunks_exact(4)
+                .zip(b.chunks_exact(4))
+                .filter(|(p, q)| p != q)
+                .count() as f64
+                / f64::from(w * h).max(1.0);
             let mismatch = mismatch_fraction(&a, &b, w, h, opts.tolerance);
             let psnr = psnr_db(&a, &b);
             Some((
@@ -377,6 +406,7 @@ pub fn image_error(
                     geometry: a,
                     impostors: b,
                 },
+                drawn,
             ))
         })
         .collect();
@@ -403,6 +433,7 @@ pub fn image_error(
             mean: results.iter().map(|r| r.0).sum::<f64>() / n,
             max: results[worst].0,
         },
+        impostor_pixel_fraction: results.iter().map(|r| r.4).sum::<f64>() / n,
         worst_view: Some(results[worst].2.clone()),
     };
     let pair = results.into_iter().nth(worst).map(|r| r.3);
