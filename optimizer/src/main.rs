@@ -222,6 +222,7 @@ fn run(cli: Cli) -> Result<ExitCode> {
             verbose,
         } => {
             set_threads(threads)?;
+            let job_path = job.display().to_string();
             let job = read_job(&job)?;
             let scene = gltf_load::load_scene_file(&scene)?;
             let output = place(
@@ -231,8 +232,13 @@ fn run(cli: Cli) -> Result<ExitCode> {
                     prune,
                     progress: true,
                     verbose,
+                    max_pairs: None,
                 },
-            );
+            )
+            .map_err(|e| match e {
+                Error::BadInput { what, message } if what == "job" => Error::bad(job_path, message),
+                e => e,
+            })?;
             write_output(out.as_deref(), &json(&output.placement)?)?;
             if let Some(s) = stats {
                 write_output(Some(&s), &json(&output.stats)?)?;

@@ -28,6 +28,9 @@ pub struct PlaceOptions {
     pub progress: bool,
     /// Print each stage's wall time to stderr as it finishes.
     pub verbose: bool,
+    /// Budget of (CPV, cluster) pairs; `None` is
+    /// [`problem_views::MAX_PAIRS`].
+    pub max_pairs: Option<u64>,
 }
 
 /// A progress observer: stage name and fraction of the whole run done.
@@ -136,16 +139,13 @@ impl Drop for Stages {
     }
 }
 
-/// Places impostors for `job` over a validated `scene`.
-pub fn place(scene: &Scene, job: &Job, opts: &PlaceOptions) -> PlaceOutput {
-    match place_controlled(scene, job, opts, &Control::default()) {
-        Ok(out) => out,
-        Err(e) => unreachable!("a run without a cancel flag cannot fail: {e}"),
-    }
+/// Places impostors for `job` over a validated `scene`. Fails only when the
+/// job needs more memory than the pair budget allows ([`Error::BadInput`]).
+pub fn place(scene: &Scene, job: &Job, opts: &PlaceOptions) -> Result<PlaceOutput> {
+    place_controlled(scene, job, opts, &Control::default())
 }
 
-/// [`place`] with progress reports and cancellation. The only error is
-/// [`Error::Cancelled`].
+/// [`place`] with progress reports and cancellation ([`Error::Cancelled`]).
 pub fn place_controlled(
     scene: &Scene,
     job: &Job,
@@ -161,9 +161,22 @@ pub fn place_controlled(
     ctl.progress("problem_views", 0.01);
 
     st.begin("approximating the problem view space");
-    let ctx = Context::new(scene, &hierarchy, job);
+    let mut ctx = Context::new(scene, &hierarchy, job);
+    ctx.pair_budget = opts.max_pairs.unwrap_or(problem_views::MAX_PAIRS);
     let pv = problem_views::approximate(&ctx, job);
     st.end("problem_views");
+    if ctx.over_budget() {
+        return Err(Error::bad(
+            "job",
+            format!(
+                "the problem view space needs more than {} (problem view, cluster) pairs (about {} GB); \
+                 raise target_frame_time_ms, enlarge problem_views.cell_size or min_vdi_deg, or shrink \
+                 the view space",
+                ctx.pair_budget,
+                ctx.pair_budget * problem_views::BYTES_PER_PAIR / 1_000_000_000
+            ),
+        ));
+    }
     ctl.check()?;
     ctl.progress("candidates", 0.1);
 
@@ -343,7 +356,11 @@ mod tests {
             .num_threads(threads)
             .build()
             .unwrap();
-        pool.install(|| place(&scene, &job, &PlaceOptions::default()).placement)
+        pool.install(|| {
+            place(&scene, &job, &PlaceOptions::default())
+                .unwrap()
+                .placement
+        })
     }
 
     #[test]
@@ -360,7 +377,7 @@ mod tests {
         for seed in [1, 2] {
             let scene = synthetic_city(seed, 5, 5);
             let job = synthetic_job(5, 5);
-            let out = place(&scene, &job, &PlaceOptions::default());
+            let out = place(&scene, &job, &PlaceOptions::default()).unwrap();
             let p = &out.placement;
             assert!(p.summary.cpvs > 0);
             assert!(p.summary.impostors > 0, "{:?}", p.summary);
@@ -404,7 +421,9 @@ mod tests {
     fn evaluation_catches_a_stripped_placement() {
         let scene = synthetic_city(1, 5, 5);
         let job = synthetic_job(5, 5);
-        let mut p = place(&scene, &job, &PlaceOptions::default()).placement;
+        let mut p = place(&scene, &job, &PlaceOptions::default())
+            .unwrap()
+            .placement;
         let over = p
             .cpvs
             .iter()
@@ -439,7 +458,7 @@ mod tests {
             on_progress: Some(&report),
         };
         let out = place_controlled(&scene, &job, &PlaceOptions::default(), &ctl).unwrap();
-        let plain = place(&scene, &job, &PlaceOptions::default());
+        let plain = place(&scene, &job, &PlaceOptions::default()).unwrap();
         assert_eq!(
             serde_json::to_string(&out.placement).unwrap(),
             serde_json::to_string(&plain.placement).unwrap()
@@ -455,6 +474,29 @@ mod tests {
         };
         let r = place_controlled(&scene, &job, &PlaceOptions::default(), &ctl);
         assert!(matches!(r, Err(Error::Cancelled)));
+    }
+
+    #[test]
+    fn jobs_beyond_the_pair_budget_are_refused() {
+        let scene = synthetic_city(1, 5, 5);
+        let job = synthetic_job(5, 5);
+        let opts = PlaceOptions {
+            max_pairs: Some(50),
+            ..PlaceOptions::default()
+        };
+        let e = place(&scene, &job, &opts).unwrap_err();
+        assert!(e.is_bad_input(), "{e}");
+        assert!(e.to_string().contains("target_frame_time_ms"), "{e}");
+        // Within the budget the same job places.
+        let pairs = place(&scene, &job, &PlaceOptions::default())
+            .unwrap()
+            .stats
+            .candidate_pairs;
+        let opts = PlaceOptions {
+            max_pairs: Some(pairs),
+            ..PlaceOptions::default()
+        };
+        assert!(place(&scene, &job, &opts).is_ok());
     }
 
     #[test]
@@ -481,7 +523,9 @@ mod tests {
     fn pruning_keeps_the_guarantee_and_never_adds_memory() {
         let scene = synthetic_city(2, 5, 5);
         let job = synthetic_job(5, 5);
-        let plain = place(&scene, &job, &PlaceOptions::default()).placement;
+        let plain = place(&scene, &job, &PlaceOptions::default())
+            .unwrap()
+            .placement;
         let pruned = place(
             &scene,
             &job,
@@ -490,6 +534,7 @@ mod tests {
                 ..PlaceOptions::default()
             },
         )
+        .unwrap()
         .placement;
         assert!(pruned.summary.memory_bytes <= plain.summary.memory_bytes);
         assert_eq!(pruned.summary.unsolved_cpvs, plain.summary.unsolved_cpvs);

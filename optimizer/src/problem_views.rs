@@ -14,6 +14,8 @@
 use glam::DVec3;
 
 use crate::cost::{Cost, CostModel};
+use std::sync::atomic::{AtomicU64, Ordering as AtomicOrdering};
+
 use crate::geom::{Aabb, Cone, Vdi, enclosing_cone, frustum_half_diagonal};
 use crate::hierarchy::Hierarchy;
 use crate::job::Job;
@@ -202,7 +204,20 @@ pub struct Context<'a> {
     pub half_diagonal: f64,
     /// Pitch range, radians.
     pub pitch: [f64; 2],
+    /// (CPV, cluster) pairs recorded so far; the approximation stops early
+    /// once it exceeds `pair_budget`.
+    pub pairs: AtomicU64,
+    /// The most (CPV, cluster) pairs a run may hold (see [`MAX_PAIRS`]).
+    pub pair_budget: u64,
 }
+
+/// The default budget of (CPV, cluster) pairs. Every pair costs about 50
+/// bytes through candidate generation and the greedy, so 300 M pairs need
+/// about 15 GB; a job beyond it is refused instead of exhausting memory.
+pub const MAX_PAIRS: u64 = 300_000_000;
+
+/// Bytes held per (CPV, cluster) pair from the approximation to the greedy.
+pub const BYTES_PER_PAIR: u64 = 49;
 
 impl<'a> Context<'a> {
     /// The context of a job.
@@ -215,7 +230,14 @@ impl<'a> Context<'a> {
             t_max: job.target_frame_time_ms,
             half_diagonal: frustum_half_diagonal(job.camera.fov_deg, f64::from(w) / f64::from(h)),
             pitch: job.view_space.pitch_deg.map(f64::to_radians),
+            pairs: AtomicU64::new(0),
+            pair_budget: MAX_PAIRS,
         }
+    }
+
+    /// True once the recorded pairs exceed the budget.
+    pub fn over_budget(&self) -> bool {
+        self.pairs.load(AtomicOrdering::Relaxed) > self.pair_budget
     }
 
     /// True when some direction of `vdi` lies in the pitch range.
@@ -404,6 +426,13 @@ fn process(
     leaf_level: u8,
 ) -> RegionResult {
     let node = &kd[id as usize];
+    if ctx.over_budget() {
+        return RegionResult {
+            cpvs: Vec::new(),
+            cones: 0,
+            regions: 0,
+        };
+    }
     let region = node.aabb;
     let costs = RegionCosts::new(ctx, &region);
     let open = ancestors(parent_problems);
@@ -465,7 +494,9 @@ fn process(
                         node_costs: nodes.iter().map(|&(_, c)| c).collect(),
                     }
                 })
-                .collect();
+                .collect::<Vec<Cpv>>();
+            let pairs: usize = cpvs.iter().map(|c| c.node_ids.len()).sum();
+            ctx.pairs.fetch_add(pairs as u64, AtomicOrdering::Relaxed);
             RegionResult {
                 cpvs,
                 cones,
