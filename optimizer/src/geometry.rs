@@ -558,6 +558,69 @@ mod tests {
     }
 
     #[test]
+    fn textured_quad_reads_material_texture_and_uvs() {
+        use crate::glb::{self, GlbBuilder, Node, Sampler};
+        let texels = [
+            255u8, 0, 0, 255, 0, 255, 0, 255, 0, 0, 255, 255, 255, 255, 255, 128,
+        ];
+        let png = crate::bake::encode_png(&texels, 2, 2).unwrap();
+        let mut b = GlbBuilder::new();
+        let image = b.add_image_png("t", &png).unwrap();
+        let sampler = b.add_sampler(&Sampler::linear_clamp()).unwrap();
+        let texture = b.add_texture(image, Some(sampler)).unwrap();
+        let mut m = glb::Material::new("m", [0.5, 1.0, 1.0, 1.0]);
+        m.base_color_texture = Some(texture);
+        m.alpha_mode = glb::AlphaMode::Mask { cutoff: 0.25 };
+        m.double_sided = true;
+        let material = b.add_material(&m).unwrap();
+        let positions = [
+            [0.0, 0.0, 0.0],
+            [1.0, 0.0, 0.0],
+            [1.0, 1.0, 0.0],
+            [0.0, 1.0, 0.0],
+        ];
+        let uvs = [[0.0, 1.0], [1.0, 1.0], [1.0, 0.0], [0.0, 0.0]];
+        let g = glb::Geometry {
+            positions: &positions,
+            normals: None,
+            texcoords: Some(&uvs),
+            indices: &[0, 1, 2, 0, 2, 3],
+        };
+        let mesh = b.add_mesh_from("quad", &[(g, Some(material))]).unwrap();
+        let a = b.add_node(Node::new("a").with_mesh(mesh)).unwrap();
+        let c = b
+            .add_node(Node::new("b").with_mesh(mesh).with_trs(
+                [5.0, 0.0, 0.0],
+                [0.0, 0.0, 0.0, 1.0],
+                [2.0; 3],
+            ))
+            .unwrap();
+        b.set_scene_roots(&[a, c]).unwrap();
+        let geom = load_geometry_bytes(&b.finish(), "quad.glb").unwrap();
+        assert_eq!(geom.object_count(), 2);
+        assert_eq!(geom.meshes.len(), 1, "the instanced quad is read once");
+        assert_eq!(geom.instances.len(), 2);
+        assert_eq!(
+            geom.instances[1]
+                .transform
+                .transform_point3(glam::DVec3::new(1.0, 1.0, 0.0)),
+            glam::DVec3::new(7.0, 2.0, 0.0)
+        );
+        let q = &geom.meshes[0];
+        assert_eq!(q.uvs[2], Vec2::new(1.0, 0.0));
+        // No normals in the file: computed from the faces (+z).
+        assert!(q.normals.iter().all(|n| (*n - Vec3::Z).length() < 1e-6));
+        let mat = &geom.materials[q.material as usize];
+        assert_eq!(mat.base_color, [0.5, 1.0, 1.0, 1.0]);
+        assert_eq!(mat.alpha_mode, AlphaMode::Mask(0.25));
+        assert!(mat.double_sided);
+        let t = &geom.textures[mat.base_color_texture.unwrap() as usize];
+        assert_eq!((t.width, t.height), (2, 2));
+        assert_eq!(t.rgba, texels);
+        assert_eq!(t.wrap_s, crate::raster::Wrap::ClampToEdge);
+    }
+
+    #[test]
     fn summaries_have_no_geometry() {
         let e = load_geometry_bytes(br#"{"objects": []}"#, "s.json").unwrap_err();
         assert!(e.to_string().contains("no geometry"), "{e}");
