@@ -1,0 +1,49 @@
+//! `impostor-server`: the HTTP service (see the library docs and README).
+
+use std::path::PathBuf;
+
+use clap::Parser;
+use server::{AppState, Config, run};
+
+/// HTTP service for impostor placement jobs.
+#[derive(Parser)]
+#[command(name = "impostor-server", version, about)]
+struct Cli {
+    /// Address to listen on.
+    #[arg(long, default_value = "127.0.0.1:8080")]
+    listen: String,
+    /// Directory of the job database and files.
+    #[arg(long, default_value = "impostor-data")]
+    data_dir: PathBuf,
+    /// Worker threads (jobs running at once).
+    #[arg(long, default_value_t = 1)]
+    workers: usize,
+    /// Largest upload, MiB.
+    #[arg(long, default_value_t = 256)]
+    max_upload_mb: usize,
+    /// Most jobs waiting in the queue.
+    #[arg(long, default_value_t = 64)]
+    max_queue: usize,
+}
+
+#[tokio::main]
+async fn main() -> std::io::Result<()> {
+    tracing_subscriber::fmt()
+        .with_env_filter(
+            tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| "info".into()),
+        )
+        .with_writer(std::io::stderr)
+        .init();
+    let cli = Cli::parse();
+    let mut cfg = Config::new(cli.data_dir);
+    cfg.workers = cli.workers.max(1);
+    cfg.max_upload_mb = cli.max_upload_mb.max(1);
+    cfg.max_queue = cli.max_queue.max(1);
+    let state = AppState::open(cfg)?;
+    let listener = tokio::net::TcpListener::bind(&cli.listen).await?;
+    tracing::info!("listening on {}", listener.local_addr()?);
+    run(listener, state, async {
+        let _ = tokio::signal::ctrl_c().await;
+    })
+    .await
+}

@@ -1,0 +1,310 @@
+//! The service over a real TCP listener on 127.0.0.1.
+
+use std::net::SocketAddr;
+use std::path::PathBuf;
+use std::time::{Duration, Instant};
+
+use serde_json::{Value, json};
+use server::{AppState, Config, run};
+use tokio::io::{AsyncReadExt, AsyncWriteExt};
+
+fn job_json() -> Vec<u8> {
+    std::fs::read(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../fixtures/jobs/city-small.json"
+    ))
+    .unwrap()
+}
+
+fn city(scale: f64) -> Vec<u8> {
+    optimizer::citygen::generate(&optimizer::citygen::CityParams { seed: 1, scale }).unwrap()
+}
+
+fn temp_dir(name: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("impostor-server-{name}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    d
+}
+
+async fn start(cfg: Config) -> SocketAddr {
+    let state = AppState::open(cfg).unwrap();
+    let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
+    let addr = listener.local_addr().unwrap();
+    tokio::spawn(run(listener, state, std::future::pending()));
+    addr
+}
+
+/// One HTTP/1.1 request (`Connection: close`); returns status and body.
+async fn request(
+    addr: SocketAddr,
+    method: &str,
+    path: &str,
+    ctype: Option<&str>,
+    body: &[u8],
+) -> (u16, Vec<u8>) {
+    let mut s = tokio::net::TcpStream::connect(addr).await.unwrap();
+    let mut head = format!("{method} {path} HTTP/1.1\r\nHost: test\r\nConnection: close\r\n");
+    if let Some(c) = ctype {
+        head.push_str(&format!("Content-Type: {c}\r\n"));
+    }
+    head.push_str(&format!("Content-Length: {}\r\n\r\n", body.len()));
+    s.write_all(head.as_bytes()).await.unwrap();
+    // The server may answer (413) before reading a large body.
+    let _ = s.write_all(body).await;
+    let mut raw = Vec::new();
+    let _ = s.read_to_end(&mut raw).await;
+    let split = raw
+        .windows(4)
+        .position(|w| w == b"\r\n\r\n")
+        .expect("a complete HTTP response");
+    let headers = String::from_utf8_lossy(&raw[..split]).to_ascii_lowercase();
+    let status: u16 = headers[9..12].parse().unwrap();
+    let mut payload = raw[split + 4..].to_vec();
+    if headers.contains("transfer-encoding: chunked") {
+        let mut out = Vec::new();
+        let mut rest = &payload[..];
+        loop {
+            let line_end = rest.windows(2).position(|w| w == b"\r\n").unwrap();
+            let size =
+                usize::from_str_radix(std::str::from_utf8(&rest[..line_end]).unwrap().trim(), 16)
+                    .unwrap();
+            if size == 0 {
+                break;
+            }
+            out.extend_from_slice(&rest[line_end + 2..line_end + 2 + size]);
+            rest = &rest[line_end + 4 + size..];
+        }
+        payload = out;
+    }
+    (status, payload)
+}
+
+async fn get_json(addr: SocketAddr, path: &str) -> (u16, Value) {
+    let (s, b) = request(addr, "GET", path, None, b"").await;
+    (s, serde_json::from_slice(&b).unwrap_or(Value::Null))
+}
+
+fn multipart(parts: &[(&str, &[u8])]) -> (String, Vec<u8>) {
+    let boundary = "XimpostorBoundaryX";
+    let mut body = Vec::new();
+    for (name, data) in parts {
+        body.extend_from_slice(
+            format!(
+                "--{boundary}\r\nContent-Disposition: form-data; name=\"{name}\"; filename=\"{name}\"\r\nContent-Type: application/octet-stream\r\n\r\n"
+            )
+            .as_bytes(),
+        );
+        body.extend_from_slice(data);
+        body.extend_from_slice(b"\r\n");
+    }
+    body.extend_from_slice(format!("--{boundary}--\r\n").as_bytes());
+    (format!("multipart/form-data; boundary={boundary}"), body)
+}
+
+async fn wait_final(addr: SocketAddr, id: i64, limit: Duration) -> Value {
+    let start = Instant::now();
+    loop {
+        let (s, v) = get_json(addr, &format!("/v1/jobs/{id}")).await;
+        assert_eq!(s, 200, "{v}");
+        if matches!(
+            v["state"].as_str(),
+            Some("succeeded" | "failed" | "cancelled")
+        ) {
+            return v;
+        }
+        assert!(start.elapsed() < limit, "job {id} not finished: {v}");
+        tokio::time::sleep(Duration::from_millis(100)).await;
+    }
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn summary_and_glb_jobs_succeed_with_the_cli_bytes() {
+    let mut cfg = Config::new(temp_dir("ok"));
+    cfg.eval_views = 500;
+    let addr = start(cfg).await;
+    let glb = city(0.1);
+    let scene = optimizer::gltf_load::load_scene_bytes(&glb, "city").unwrap();
+    let job = optimizer::job::Job::from_json(&job_json(), "job").unwrap();
+    let expected = optimizer::to_json_bytes(
+        &optimizer::pipeline::place(&scene, &job, &Default::default())
+            .unwrap()
+            .placement,
+    )
+    .unwrap();
+
+    // Inline JSON scene summary.
+    let body = json!({
+        "scene": serde_json::to_value(scene.summary()).unwrap(),
+        "job": serde_json::from_slice::<Value>(&job_json()).unwrap(),
+    });
+    let (s, b) = request(
+        addr,
+        "POST",
+        "/v1/jobs",
+        Some("application/json"),
+        body.to_string().as_bytes(),
+    )
+    .await;
+    assert_eq!(s, 202, "{}", String::from_utf8_lossy(&b));
+    let id1 = serde_json::from_slice::<Value>(&b).unwrap()["id"]
+        .as_i64()
+        .unwrap();
+
+    // GLB upload, baked.
+    let (ct, body) = multipart(&[("scene", &glb), ("job", &job_json()), ("bake", b"true")]);
+    let (s, b) = request(addr, "POST", "/v1/jobs", Some(&ct), &body).await;
+    assert_eq!(s, 202, "{}", String::from_utf8_lossy(&b));
+    let id2 = serde_json::from_slice::<Value>(&b).unwrap()["id"]
+        .as_i64()
+        .unwrap();
+
+    for id in [id1, id2] {
+        let v = wait_final(addr, id, Duration::from_secs(120)).await;
+        assert_eq!(v["state"], "succeeded", "{v}");
+        assert_eq!(v["progress"], 1.0);
+        let (s, p) = request(addr, "GET", &format!("/v1/jobs/{id}/placement"), None, b"").await;
+        assert_eq!(s, 200);
+        assert!(
+            p == expected,
+            "job {id}: the placement differs from the CLI's bytes"
+        );
+        let (s, e) = get_json(addr, &format!("/v1/jobs/{id}/evaluation")).await;
+        assert_eq!(s, 200);
+        assert_eq!(e["violations_in_solved"], 0, "{e}");
+    }
+    let (s, _) = get_json(addr, &format!("/v1/jobs/{id1}/impostors.glb")).await;
+    assert_eq!(s, 404, "job 1 did not ask for baking");
+    let (s, g) = request(
+        addr,
+        "GET",
+        &format!("/v1/jobs/{id2}/impostors.glb"),
+        None,
+        b"",
+    )
+    .await;
+    assert_eq!(s, 200);
+    assert!(g.starts_with(b"glTF"));
+
+    let (s, list) = get_json(addr, "/v1/jobs?limit=1").await;
+    assert_eq!(s, 200);
+    assert_eq!(list["jobs"].as_array().unwrap().len(), 1);
+    assert_eq!(list["next_after"], id1);
+    let (s, _) = get_json(addr, "/healthz").await;
+    assert_eq!(s, 200);
+
+    // Deleting a finished job removes it.
+    let (s, _) = request(addr, "DELETE", &format!("/v1/jobs/{id1}"), None, b"").await;
+    assert_eq!(s, 200);
+    let (s, _) = get_json(addr, &format!("/v1/jobs/{id1}")).await;
+    assert_eq!(s, 404);
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn bad_requests_name_the_problem() {
+    let mut cfg = Config::new(temp_dir("bad"));
+    cfg.max_upload_mb = 1;
+    let addr = start(cfg).await;
+    let (s, v) = get_json(addr, "/v1/jobs/999").await;
+    assert_eq!(s, 404, "{v}");
+    assert!(v["error"].as_str().unwrap().contains("999"));
+
+    let (s, _) = request(addr, "POST", "/v1/jobs", Some("text/plain"), b"hi").await;
+    assert_eq!(s, 415);
+
+    // A job with an unknown field.
+    let summary =
+        json!({"objects": [{"min": [0,0,0], "max": [1,1,1], "triangles": 10, "draw_calls": 1}]});
+    let body = json!({"scene": summary, "job": {"view_space": {"min": [0,1,0], "max": [10,2,10]}, "colour": "red"}});
+    let (s, b) = request(
+        addr,
+        "POST",
+        "/v1/jobs",
+        Some("application/json"),
+        body.to_string().as_bytes(),
+    )
+    .await;
+    assert_eq!(s, 422);
+    assert!(String::from_utf8_lossy(&b).contains("colour"));
+
+    // A malformed GLB.
+    let (ct, body) = multipart(&[
+        ("scene", b"glTF\x02\x00\x00\x00garbage"),
+        ("job", &job_json()),
+    ]);
+    let (s, b) = request(addr, "POST", "/v1/jobs", Some(&ct), &body).await;
+    assert_eq!(s, 422, "{}", String::from_utf8_lossy(&b));
+    assert!(String::from_utf8_lossy(&b).contains("scene"));
+
+    // A missing part.
+    let (ct, body) = multipart(&[("job", &job_json())]);
+    let (s, b) = request(addr, "POST", "/v1/jobs", Some(&ct), &body).await;
+    assert_eq!(s, 400);
+    assert!(String::from_utf8_lossy(&b).contains("`scene`"));
+
+    // Over the upload limit.
+    let big = vec![b'x'; 2 * 1024 * 1024];
+    let (ct, body) = multipart(&[("scene", &big), ("job", &job_json())]);
+    let (s, _) = request(addr, "POST", "/v1/jobs", Some(&ct), &body).await;
+    assert_eq!(s, 413);
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn full_queue_and_cancellation() {
+    let mut cfg = Config::new(temp_dir("queue"));
+    cfg.max_queue = 0;
+    let addr = start(cfg).await;
+    let summary = serde_json::to_value(
+        optimizer::gltf_load::load_scene_bytes(&city(0.1), "c")
+            .unwrap()
+            .summary(),
+    )
+    .unwrap();
+    let body =
+        json!({"scene": summary, "job": serde_json::from_slice::<Value>(&job_json()).unwrap()});
+    let (s, b) = request(
+        addr,
+        "POST",
+        "/v1/jobs",
+        Some("application/json"),
+        body.to_string().as_bytes(),
+    )
+    .await;
+    assert_eq!(s, 429, "{}", String::from_utf8_lossy(&b));
+
+    // A long job (the full city's reference) is cancelled promptly.
+    let addr = start(Config::new(temp_dir("cancel"))).await;
+    let summary = serde_json::to_value(
+        optimizer::gltf_load::load_scene_bytes(&city(1.0), "c")
+            .unwrap()
+            .summary(),
+    )
+    .unwrap();
+    let job: Value = serde_json::from_slice(
+        &std::fs::read(concat!(
+            env!("CARGO_MANIFEST_DIR"),
+            "/../fixtures/jobs/vienna-reference.json"
+        ))
+        .unwrap(),
+    )
+    .unwrap();
+    let body = json!({"scene": summary, "job": job});
+    let (s, b) = request(
+        addr,
+        "POST",
+        "/v1/jobs",
+        Some("application/json"),
+        body.to_string().as_bytes(),
+    )
+    .await;
+    assert_eq!(s, 202, "{}", String::from_utf8_lossy(&b));
+    let id = serde_json::from_slice::<Value>(&b).unwrap()["id"]
+        .as_i64()
+        .unwrap();
+    tokio::time::sleep(Duration::from_millis(1500)).await;
+    let (s, _) = request(addr, "DELETE", &format!("/v1/jobs/{id}"), None, b"").await;
+    assert_eq!(s, 200);
+    let v = wait_final(addr, id, Duration::from_secs(30)).await;
+    assert_eq!(v["state"], "cancelled", "{v}");
+    let (s, _) = get_json(addr, &format!("/v1/jobs/{id}/placement")).await;
+    assert_eq!(s, 409);
+}
