@@ -1,0 +1,125 @@
+//! Durability: the service binary killed with SIGKILL mid-job and restarted
+//! on the same data directory finishes every accepted job.
+
+use std::io::{Read, Write};
+use std::net::{SocketAddr, TcpStream};
+use std::process::{Child, Command, Stdio};
+use std::time::{Duration, Instant};
+
+use serde_json::{Value, json};
+
+fn request(addr: SocketAddr, method: &str, path: &str, body: &[u8]) -> Option<(u16, Vec<u8>)> {
+    let mut s = TcpStream::connect_timeout(&addr, Duration::from_secs(2)).ok()?;
+    let ctype = if body.is_empty() {
+        ""
+    } else {
+        "Content-Type: application/json\r\n"
+    };
+    let head = format!(
+        "{method} {path} HTTP/1.1\r\nHost: t\r\nConnection: close\r\n{ctype}Content-Length: {}\r\n\r\n",
+        body.len()
+    );
+    s.write_all(head.as_bytes()).ok()?;
+    s.write_all(body).ok()?;
+    let mut raw = Vec::new();
+    s.read_to_end(&mut raw).ok()?;
+    let split = raw.windows(4).position(|w| w == b"\r\n\r\n")?;
+    let status = std::str::from_utf8(&raw[9..12]).ok()?.parse().ok()?;
+    Some((status, raw[split + 4..].to_vec()))
+}
+
+fn spawn(dir: &std::path::Path, addr: SocketAddr) -> Child {
+    let child = Command::new(env!("CARGO_BIN_EXE_impostor-server"))
+        .args(["--listen", &addr.to_string(), "--data-dir"])
+        .arg(dir)
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .spawn()
+        .expect("start impostor-server");
+    let start = Instant::now();
+    while request(addr, "GET", "/healthz", b"").is_none() {
+        assert!(
+            start.elapsed() < Duration::from_secs(20),
+            "server did not start"
+        );
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    child
+}
+
+#[test]
+fn kill_9_and_restart_finishes_every_job() {
+    let dir = std::env::temp_dir().join(format!("impostor-restart-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    let addr: SocketAddr = {
+        let l = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
+        l.local_addr().unwrap()
+    };
+    let glb = optimizer::citygen::generate(&optimizer::citygen::CityParams {
+        seed: 1,
+        scale: 0.1,
+    })
+    .unwrap();
+    let scene = optimizer::gltf_load::load_scene_bytes(&glb, "c").unwrap();
+    let job_bytes = std::fs::read(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../fixtures/jobs/city-small.json"
+    ))
+    .unwrap();
+    let job = optimizer::job::Job::from_json(&job_bytes, "job").unwrap();
+    let expected = optimizer::to_json_bytes(
+        &optimizer::pipeline::place(&scene, &job, &Default::default())
+            .unwrap()
+            .placement,
+    )
+    .unwrap();
+    let body = json!({
+        "scene": serde_json::to_value(scene.summary()).unwrap(),
+        "job": serde_json::from_slice::<Value>(&job_bytes).unwrap(),
+    })
+    .to_string();
+
+    let mut child = spawn(&dir, addr);
+    let mut ids = Vec::new();
+    for _ in 0..3 {
+        let (s, b) = request(addr, "POST", "/v1/jobs", body.as_bytes()).unwrap();
+        assert_eq!(s, 202, "{}", String::from_utf8_lossy(&b));
+        ids.push(
+            serde_json::from_slice::<Value>(&b).unwrap()["id"]
+                .as_i64()
+                .unwrap(),
+        );
+    }
+    std::thread::sleep(Duration::from_millis(300));
+    child.kill().unwrap(); // SIGKILL
+    child.wait().unwrap();
+
+    let mut child = spawn(&dir, addr);
+    let start = Instant::now();
+    for &id in &ids {
+        loop {
+            let (s, b) = request(addr, "GET", &format!("/v1/jobs/{id}"), b"").unwrap();
+            assert_eq!(s, 200);
+            let v: Value = serde_json::from_slice(&b).unwrap();
+            match v["state"].as_str() {
+                Some("succeeded") => break,
+                Some("failed" | "cancelled") => panic!("job {id}: {v}"),
+                _ => {}
+            }
+            assert!(
+                start.elapsed() < Duration::from_secs(120),
+                "job {id} unfinished: {v}"
+            );
+            std::thread::sleep(Duration::from_millis(100));
+        }
+        let (s, p) = request(addr, "GET", &format!("/v1/jobs/{id}/placement"), b"").unwrap();
+        assert_eq!(s, 200);
+        assert!(
+            p == expected,
+            "job {id}: placement differs after the restart"
+        );
+    }
+    child.kill().unwrap();
+    child.wait().unwrap();
+    let _ = std::fs::remove_dir_all(&dir);
+}
