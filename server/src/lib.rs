@@ -29,6 +29,8 @@ use serde::Deserialize;
 use serde_json::{Value, json};
 
 use optimizer::job::Job;
+
+pub mod openapi;
 use optimizer::pipeline::{Control, PlaceOptions, place_controlled};
 
 /// Version of the optimizer library this service is built against.
@@ -687,6 +689,10 @@ async fn delete(
     }
 }
 
+async fn openapi_doc() -> axum::Json<Value> {
+    axum::Json(openapi::openapi())
+}
+
 async fn healthz() -> axum::Json<Value> {
     axum::Json(json!({ "status": "ok", "version": OPTIMIZER_VERSION }))
 }
@@ -696,6 +702,7 @@ pub fn app(state: AppState) -> Router {
     let limit = state.0.cfg.max_upload_mb.saturating_mul(1024 * 1024);
     Router::new()
         .route("/healthz", get(healthz))
+        .route("/openapi.json", get(openapi_doc))
         .route("/v1/jobs", get(list).post(submit))
         .route("/v1/jobs/{id}", get(status).delete(delete))
         .route("/v1/jobs/{id}/placement", get(placement))
