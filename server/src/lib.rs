@@ -30,6 +30,7 @@ use serde_json::{Value, json};
 
 use optimizer::job::Job;
 
+pub mod client;
 pub mod openapi;
 use optimizer::pipeline::{Control, PlaceOptions, place_controlled};
 

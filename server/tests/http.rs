@@ -6,7 +6,6 @@ use std::time::{Duration, Instant};
 
 use serde_json::{Value, json};
 use server::{AppState, Config, run};
-use tokio::io::{AsyncReadExt, AsyncWriteExt};
 
 fn job_json() -> Vec<u8> {
     std::fs::read(concat!(
@@ -34,7 +33,6 @@ async fn start(cfg: Config) -> SocketAddr {
     addr
 }
 
-/// One HTTP/1.1 request (`Connection: close`); returns status and body.
 async fn request(
     addr: SocketAddr,
     method: &str,
@@ -42,41 +40,9 @@ async fn request(
     ctype: Option<&str>,
     body: &[u8],
 ) -> (u16, Vec<u8>) {
-    let mut s = tokio::net::TcpStream::connect(addr).await.unwrap();
-    let mut head = format!("{method} {path} HTTP/1.1\r\nHost: test\r\nConnection: close\r\n");
-    if let Some(c) = ctype {
-        head.push_str(&format!("Content-Type: {c}\r\n"));
-    }
-    head.push_str(&format!("Content-Length: {}\r\n\r\n", body.len()));
-    s.write_all(head.as_bytes()).await.unwrap();
-    // The server may answer (413) before reading a large body.
-    let _ = s.write_all(body).await;
-    let mut raw = Vec::new();
-    let _ = s.read_to_end(&mut raw).await;
-    let split = raw
-        .windows(4)
-        .position(|w| w == b"\r\n\r\n")
-        .expect("a complete HTTP response");
-    let headers = String::from_utf8_lossy(&raw[..split]).to_ascii_lowercase();
-    let status: u16 = headers[9..12].parse().unwrap();
-    let mut payload = raw[split + 4..].to_vec();
-    if headers.contains("transfer-encoding: chunked") {
-        let mut out = Vec::new();
-        let mut rest = &payload[..];
-        loop {
-            let line_end = rest.windows(2).position(|w| w == b"\r\n").unwrap();
-            let size =
-                usize::from_str_radix(std::str::from_utf8(&rest[..line_end]).unwrap().trim(), 16)
-                    .unwrap();
-            if size == 0 {
-                break;
-            }
-            out.extend_from_slice(&rest[line_end + 2..line_end + 2 + size]);
-            rest = &rest[line_end + 4 + size..];
-        }
-        payload = out;
-    }
-    (status, payload)
+    server::client::request(addr, method, path, ctype, body)
+        .await
+        .unwrap()
 }
 
 async fn get_json(addr: SocketAddr, path: &str) -> (u16, Value) {

@@ -1,0 +1,105 @@
+//! Status-route latency under load while a job runs (loopback only, bounded
+//! in count and time):
+//!
+//! ```sh
+//! cargo run --release -p server --example load [-- RATE SECONDS]
+//! ```
+//!
+//! Starts the service on 127.0.0.1 with a temporary data directory, submits
+//! the full-scale generated city with the reference job (a run of about 20 s
+//! on 2 cores), then sends `RATE` (default 200) `GET /v1/jobs/{id}` requests
+//! per second for `SECONDS` (default 10) and prints the latency percentiles.
+
+use std::time::{Duration, Instant};
+
+use serde_json::{Value, json};
+use server::client::request;
+use server::{AppState, Config, run};
+
+#[tokio::main(flavor = "multi_thread", worker_threads = 2)]
+async fn main() -> std::io::Result<()> {
+    let args: Vec<String> = std::env::args().collect();
+    let rate: u64 = args
+        .get(1)
+        .and_then(|a| a.parse().ok())
+        .unwrap_or(200)
+        .clamp(1, 2000);
+    let seconds: u64 = args
+        .get(2)
+        .and_then(|a| a.parse().ok())
+        .unwrap_or(10)
+        .clamp(1, 60);
+    let dir = std::env::temp_dir().join(format!("impostor-load-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    let state = AppState::open(Config::new(&dir))?;
+    let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await?;
+    let addr = listener.local_addr()?;
+    tokio::spawn(run(listener, state, std::future::pending()));
+
+    let glb = optimizer::citygen::generate(&optimizer::citygen::CityParams {
+        seed: 1,
+        scale: 1.0,
+    })
+    .map_err(std::io::Error::other)?;
+    let scene =
+        optimizer::gltf_load::load_scene_bytes(&glb, "city").map_err(std::io::Error::other)?;
+    let job: Value = serde_json::from_slice(&std::fs::read(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../fixtures/jobs/vienna-reference.json"
+    ))?)?;
+    let body = json!({"scene": serde_json::to_value(scene.summary())?, "job": job}).to_string();
+    let (status, b) = request(
+        addr,
+        "POST",
+        "/v1/jobs",
+        Some("application/json"),
+        body.as_bytes(),
+    )
+    .await?;
+    assert_eq!(status, 202, "{}", String::from_utf8_lossy(&b));
+    let id = serde_json::from_slice::<Value>(&b)?["id"]
+        .as_i64()
+        .unwrap_or(1);
+    let path = format!("/v1/jobs/{id}");
+
+    let mut tick = tokio::time::interval(Duration::from_micros(1_000_000 / rate));
+    let mut tasks = Vec::new();
+    let start = Instant::now();
+    for _ in 0..rate * seconds {
+        tick.tick().await;
+        let path = path.clone();
+        tasks.push(tokio::spawn(async move {
+            let t = Instant::now();
+            let r = request(addr, "GET", &path, None, b"").await;
+            (t.elapsed(), r.map(|(s, _)| s).unwrap_or(0))
+        }));
+    }
+    let mut lat = Vec::new();
+    let mut failed = 0;
+    for t in tasks {
+        let (d, s) = t.await.map_err(std::io::Error::other)?;
+        if s != 200 {
+            failed += 1;
+        }
+        lat.push(d.as_secs_f64() * 1e3);
+    }
+    let elapsed = start.elapsed().as_secs_f64();
+    lat.sort_by(f64::total_cmp);
+    let pct = |p: f64| lat[((lat.len() - 1) as f64 * p).round() as usize];
+    let (_, b) = request(addr, "GET", &path, None, b"").await?;
+    let v: Value = serde_json::from_slice(&b)?;
+    println!(
+        "{} requests in {elapsed:.1} s ({:.0}/s), {failed} failed: p50 {:.2} ms, p99 {:.2} ms, max {:.2} ms; job {} at stage {} ({:.0} %)",
+        lat.len(),
+        lat.len() as f64 / elapsed,
+        pct(0.5),
+        pct(0.99),
+        lat[lat.len() - 1],
+        v["state"],
+        v["stage"],
+        v["progress"].as_f64().unwrap_or(0.0) * 100.0
+    );
+    let _ = request(addr, "DELETE", &path, None, b"").await;
+    let _ = std::fs::remove_dir_all(&dir);
+    Ok(())
+}
