@@ -22,8 +22,8 @@ use gltf::accessor::{DataType, Dimensions};
 use gltf::mesh::Mode;
 
 use crate::gltf_load::{
-    AccessorBytes, check_glb_header, check_indices, checked_accessor, gltf_error, guarded,
-    precheck_root_with, read_uri, resolve_buffers, type_name, walk_scene,
+    AccessorBytes, base_dir_of, check_glb_header, check_indices, checked_accessor, gltf_error,
+    guarded, precheck_root_with, read_uri, resolve_buffers, type_name, walk_scene,
 };
 use crate::{Error, Result};
 
@@ -141,12 +141,7 @@ impl SceneGeometry {
 pub fn load_geometry_file(path: &Path) -> Result<SceneGeometry> {
     let source = path.display().to_string();
     let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
-    let base_dir = match path.parent() {
-        Some(p) if p.as_os_str().is_empty() => Path::new("."),
-        Some(p) => p,
-        None => Path::new("."),
-    };
-    load(&bytes, &source, Some(base_dir))
+    load(&bytes, &source, Some(base_dir_of(path)))
 }
 
 /// Loads the geometry of uploaded bytes (GLB or glTF JSON with embedded

@@ -98,12 +98,15 @@ pub fn load_scene_file(path: &Path) -> Result<Scene> {
     if !bytes.starts_with(b"glTF") && is_json_ext {
         return SceneSummary::from_json(&bytes, &source);
     }
-    let base_dir = match path.parent() {
-        Some(p) if p.as_os_str().is_empty() => Path::new("."),
-        Some(p) => p,
-        None => Path::new("."),
-    };
-    dispatch(&bytes, &source, Some(base_dir))
+    dispatch(&bytes, &source, Some(base_dir_of(path)))
+}
+
+/// The directory relative resources of a local glTF file are read from.
+pub(crate) fn base_dir_of(path: &Path) -> &Path {
+    match path.parent() {
+        Some(p) if !p.as_os_str().is_empty() => p,
+        _ => Path::new("."),
+    }
 }
 
 /// Loads a scene from bytes (an upload): a GLB, a JSON scene summary (JSON

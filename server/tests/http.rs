@@ -45,6 +45,18 @@ async fn request(
         .unwrap()
 }
 
+/// Submits a JSON job body; returns status and response body.
+async fn submit_json(addr: SocketAddr, body: &Value) -> (u16, Vec<u8>) {
+    request(
+        addr,
+        "POST",
+        "/v1/jobs",
+        Some("application/json"),
+        body.to_string().as_bytes(),
+    )
+    .await
+}
+
 async fn get_json(addr: SocketAddr, path: &str) -> (u16, Value) {
     let (s, b) = request(addr, "GET", path, None, b"").await;
     (s, serde_json::from_slice(&b).unwrap_or(Value::Null))
@@ -103,14 +115,7 @@ async fn summary_and_glb_jobs_succeed_with_the_cli_bytes() {
         "scene": serde_json::to_value(scene.summary()).unwrap(),
         "job": serde_json::from_slice::<Value>(&job_json()).unwrap(),
     });
-    let (s, b) = request(
-        addr,
-        "POST",
-        "/v1/jobs",
-        Some("application/json"),
-        body.to_string().as_bytes(),
-    )
-    .await;
+    let (s, b) = submit_json(addr, &body).await;
     assert_eq!(s, 202, "{}", String::from_utf8_lossy(&b));
     let id1 = serde_json::from_slice::<Value>(&b).unwrap()["id"]
         .as_i64()
@@ -181,14 +186,7 @@ async fn bad_requests_name_the_problem() {
     let summary =
         json!({"objects": [{"min": [0,0,0], "max": [1,1,1], "triangles": 10, "draw_calls": 1}]});
     let body = json!({"scene": summary, "job": {"view_space": {"min": [0,1,0], "max": [10,2,10]}, "colour": "red"}});
-    let (s, b) = request(
-        addr,
-        "POST",
-        "/v1/jobs",
-        Some("application/json"),
-        body.to_string().as_bytes(),
-    )
-    .await;
+    let (s, b) = submit_json(addr, &body).await;
     assert_eq!(s, 422);
     assert!(String::from_utf8_lossy(&b).contains("colour"));
 
@@ -227,14 +225,7 @@ async fn full_queue_and_cancellation() {
     .unwrap();
     let body =
         json!({"scene": summary, "job": serde_json::from_slice::<Value>(&job_json()).unwrap()});
-    let (s, b) = request(
-        addr,
-        "POST",
-        "/v1/jobs",
-        Some("application/json"),
-        body.to_string().as_bytes(),
-    )
-    .await;
+    let (s, b) = submit_json(addr, &body).await;
     assert_eq!(s, 429, "{}", String::from_utf8_lossy(&b));
 
     // A long job (the full city's reference) is cancelled promptly.
@@ -254,14 +245,7 @@ async fn full_queue_and_cancellation() {
     )
     .unwrap();
     let body = json!({"scene": summary, "job": job});
-    let (s, b) = request(
-        addr,
-        "POST",
-        "/v1/jobs",
-        Some("application/json"),
-        body.to_string().as_bytes(),
-    )
-    .await;
+    let (s, b) = submit_json(addr, &body).await;
     assert_eq!(s, 202, "{}", String::from_utf8_lossy(&b));
     let id = serde_json::from_slice::<Value>(&b).unwrap()["id"]
         .as_i64()
