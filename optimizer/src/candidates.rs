@@ -233,7 +233,7 @@ pub fn generate(ctx: &Context, job: &Job, pv: &ProblemViews) -> Candidates {
         .into_par_iter()
         .map(|n| {
             let (g0, g1) = node_groups[n as usize];
-            if g0 == g1 {
+            if g0 == g1 || ctx.cancelled() {
                 return (Vec::new(), Vec::new());
             }
             let sphere = h.nodes[n as usize].sphere;

@@ -163,6 +163,7 @@ pub fn place_controlled(
     st.begin("approximating the problem view space");
     let mut ctx = Context::new(scene, &hierarchy, job);
     ctx.pair_budget = opts.max_pairs.unwrap_or(problem_views::MAX_PAIRS);
+    ctx.cancel = ctl.cancel;
     let pv = problem_views::approximate(&ctx, job);
     st.end("problem_views");
     if ctx.over_budget() {
@@ -497,6 +498,20 @@ mod tests {
             ..PlaceOptions::default()
         };
         assert!(place(&scene, &job, &opts).is_ok());
+    }
+
+    #[test]
+    fn cancelled_stages_stop_early() {
+        let scene = synthetic_city(1, 5, 5);
+        let job = synthetic_job(5, 5);
+        let h = Hierarchy::build(&scene);
+        let mut ctx = Context::new(&scene, &h, &job);
+        let pv = problem_views::approximate(&ctx, &job);
+        assert!(!pv.cpvs.is_empty());
+        let flag = AtomicBool::new(true);
+        ctx.cancel = Some(&flag);
+        assert!(candidates::generate(&ctx, &job, &pv).list.is_empty());
+        assert!(problem_views::approximate(&ctx, &job).cpvs.is_empty());
     }
 
     #[test]

@@ -14,7 +14,7 @@
 use glam::DVec3;
 
 use crate::cost::{Cost, CostModel};
-use std::sync::atomic::{AtomicU64, Ordering as AtomicOrdering};
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering as AtomicOrdering};
 
 use crate::geom::{Aabb, Cone, Vdi, enclosing_cone, frustum_half_diagonal};
 use crate::hierarchy::Hierarchy;
@@ -209,6 +209,9 @@ pub struct Context<'a> {
     pub pairs: AtomicU64,
     /// The most (CPV, cluster) pairs a run may hold (see [`MAX_PAIRS`]).
     pub pair_budget: u64,
+    /// When set to true, the approximation and candidate generation stop
+    /// early (the caller reports the cancellation).
+    pub cancel: Option<&'a AtomicBool>,
 }
 
 /// The default budget of (CPV, cluster) pairs. Every pair costs about 50
@@ -232,12 +235,18 @@ impl<'a> Context<'a> {
             pitch: job.view_space.pitch_deg.map(f64::to_radians),
             pairs: AtomicU64::new(0),
             pair_budget: MAX_PAIRS,
+            cancel: None,
         }
     }
 
     /// True once the recorded pairs exceed the budget.
     pub fn over_budget(&self) -> bool {
         self.pairs.load(AtomicOrdering::Relaxed) > self.pair_budget
+    }
+
+    /// True once the run was cancelled.
+    pub fn cancelled(&self) -> bool {
+        self.cancel.is_some_and(|c| c.load(AtomicOrdering::Relaxed))
     }
 
     /// True when some direction of `vdi` lies in the pitch range.
@@ -426,7 +435,7 @@ fn process(
     leaf_level: u8,
 ) -> RegionResult {
     let node = &kd[id as usize];
-    if ctx.over_budget() {
+    if ctx.over_budget() || ctx.cancelled() {
         return RegionResult {
             cpvs: Vec::new(),
             cones: 0,
