@@ -156,7 +156,8 @@ impl AppState {
                  created_ms INTEGER NOT NULL,
                  started_ms INTEGER,
                  finished_ms INTEGER
-             );",
+             );
+             CREATE TABLE IF NOT EXISTS meta (k TEXT PRIMARY KEY, v INTEGER NOT NULL);",
         )
         .map_err(io)?;
         // Unfinished jobs of a previous process run again.
@@ -399,11 +400,20 @@ impl AppState {
             ));
         }
         let db = self.0.db.lock().map_err(internal)?;
+        // Ids are never reused, not even those of deleted jobs.
         let id: i64 = db
-            .query_row("SELECT COALESCE(MAX(id), 0) + 1 FROM jobs", [], |r| {
-                r.get(0)
-            })
+            .query_row(
+                "SELECT MAX(COALESCE((SELECT v FROM meta WHERE k = 'next_id'), 1),
+                            COALESCE((SELECT MAX(id) FROM jobs), 0) + 1)",
+                [],
+                |r| r.get(0),
+            )
             .map_err(internal)?;
+        db.execute(
+            "INSERT INTO meta (k, v) VALUES ('next_id', ?1) ON CONFLICT(k) DO UPDATE SET v = ?1",
+            [id + 1],
+        )
+        .map_err(internal)?;
         let dir = self.job_dir(id);
         let _ = std::fs::remove_dir_all(&dir);
         std::fs::create_dir_all(&dir).map_err(internal)?;

@@ -163,11 +163,21 @@ async fn summary_and_glb_jobs_succeed_with_the_cli_bytes() {
     let (s, _) = get_json(addr, "/healthz").await;
     assert_eq!(s, 200);
 
-    // Deleting a finished job removes it.
-    let (s, _) = request(addr, "DELETE", &format!("/v1/jobs/{id1}"), None, b"").await;
+    // Deleting a finished job removes it; its id is not reused.
+    let (s, _) = request(addr, "DELETE", &format!("/v1/jobs/{id2}"), None, b"").await;
     assert_eq!(s, 200);
-    let (s, _) = get_json(addr, &format!("/v1/jobs/{id1}")).await;
+    let (s, _) = get_json(addr, &format!("/v1/jobs/{id2}")).await;
     assert_eq!(s, 404);
+    let body = json!({
+        "scene": serde_json::to_value(scene.summary()).unwrap(),
+        "job": serde_json::from_slice::<Value>(&job_json()).unwrap(),
+    });
+    let (s, b) = submit_json(addr, &body).await;
+    assert_eq!(s, 202);
+    let id3 = serde_json::from_slice::<Value>(&b).unwrap()["id"]
+        .as_i64()
+        .unwrap();
+    assert!(id3 > id2, "{id3} reuses a deleted id");
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
