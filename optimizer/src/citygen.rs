@@ -164,7 +164,9 @@ impl MeshData {
 }
 
 /// One facade of a unit building: the plane spanned by `origin + s·right +
-/// t·up` for `s, t ∈ [0, 1]`, windows inset along `-out`.
+/// t·up` for `s, t ∈ [0, 1]`: a wall frame around a grid of window boxes
+/// standing out along `out` (the wall plane itself is the building's closed
+/// core, see [`building`]).
 #[allow(clippy::too_many_arguments)] // a facade is its frame plus its window grid
 fn facade(m: &mut MeshData, origin: V3, right: V3, up: V3, out: V3, nx: u32, ny: u32, sills: bool) {
     let at = |s: f32, t: f32, depth: f32| {
@@ -174,7 +176,8 @@ fn facade(m: &mut MeshData, origin: V3, right: V3, up: V3, out: V3, nx: u32, ny:
             origin[2] + right[2] * s + up[2] * t - out[2] * depth,
         ]
     };
-    let inset = 0.01;
+    // Negative depth is in front of the wall: panes stand out by 0.01.
+    let inset = -0.01;
     for iy in 0..ny {
         for ix in 0..nx {
             let (s0, s1) = (ix as f32 / nx as f32, (ix + 1) as f32 / nx as f32);
@@ -206,7 +209,7 @@ fn facade(m: &mut MeshData, origin: V3, right: V3, up: V3, out: V3, nx: u32, ny:
                 at(a1, t1, 0.0),
                 at(a0, t1, 0.0),
             );
-            // Recessed pane and its reveals.
+            // The pane standing out of the wall and its four sides.
             m.quad(
                 at(a0, b0, inset),
                 at(a1, b0, inset),
@@ -263,8 +266,12 @@ fn facade(m: &mut MeshData, origin: V3, right: V3, up: V3, out: V3, nx: u32, ny:
     }
 }
 
-/// A unit building prototype (footprint `[0,1]²`, height 1): walls with a
-/// window grid on all four sides, and a roof with a cornice.
+/// A unit building prototype (footprint `[0,1]²`, height 1): a closed core
+/// box (the building's solid volume, as in CityGML LOD1 solids), facades with
+/// a window grid on all four sides, and a roof with a cornice. The facade's
+/// wall frame lies in the core's side planes with the same material and
+/// normals, so the two draw identically; the closed core is what makes the
+/// building usable as a conservative occluder (`crate::visibility`).
 fn building(nx: u32, ny: u32, sills: bool, pitched: bool) -> (MeshData, MeshData) {
     let mut walls = MeshData::default();
     facade(
@@ -307,6 +314,7 @@ fn building(nx: u32, ny: u32, sills: bool, pitched: bool) -> (MeshData, MeshData
         ny,
         sills,
     );
+    walls.cuboid([0.0, 0.0, 0.0], [1.0, 0.97, 1.0]);
     let mut roof = MeshData::default();
     roof.cuboid([-0.02, 0.97, -0.02], [1.02, 1.0, 1.02]);
     if pitched {

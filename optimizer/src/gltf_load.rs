@@ -253,6 +253,7 @@ fn load_gltf_inner(bytes: &[u8], source: &str, base_dir: Option<&Path>) -> Resul
             max,
             triangles: info.triangles,
             draw_calls: info.draw_calls,
+            lods: Vec::new(),
         });
     }
     let scene = Scene { objects };

@@ -246,6 +246,7 @@ mod tests {
                     max: p + DVec3::new(2.0, 3.0, 2.0),
                     triangles: 100 + i as u64,
                     draw_calls: 1 + (i % 3) as u32,
+                    lods: Vec::new(),
                 }
             })
             .collect();

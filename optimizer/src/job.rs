@@ -36,6 +36,110 @@ pub struct Job {
     /// Impostor memory model.
     #[serde(default)]
     pub memory: MemoryParams,
+    /// From-region visibility applied before impostors (paper §3.1,
+    /// observation 2.3): `"none"` (default), `"conservative"`, `"sampled"` or
+    /// `"precomputed"`, or an object with `mode` and the mode's knobs.
+    #[serde(default, deserialize_with = "de_visibility")]
+    #[schemars(with = "VisibilityWire")]
+    pub visibility: VisibilityParams,
+    /// Levels of detail applied before impostors.
+    #[serde(default)]
+    pub lod: LodParams,
+}
+
+/// How the visible objects of a view region are found.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, JsonSchema)]
+#[serde(rename_all = "lowercase")]
+pub enum VisibilityMode {
+    /// Every object may be visible from everywhere.
+    #[default]
+    None,
+    /// Conservative from-region visibility: closed, opaque objects occlude;
+    /// nothing visible is ever culled.
+    Conservative,
+    /// Aggressive visibility by ray sampling: objects no sampled ray reaches
+    /// are culled; the expected share of missed objects is reported.
+    Sampled,
+    /// A precomputed PVS file given with the scene (`--pvs`).
+    Precomputed,
+}
+
+/// From-region visibility parameters.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct VisibilityParams {
+    /// The mode. Default `none`.
+    #[serde(default)]
+    pub mode: VisibilityMode,
+    /// Conservative mode: the largest spacing of the sample points in a view
+    /// cell, metres; occluders shrink by half the actual spacing per axis.
+    /// Default 4.
+    #[serde(default = "default_sample_spacing")]
+    pub sample_spacing_m: f64,
+    /// Sampled mode: rays cast from each view cell. Default 8192.
+    #[serde(default = "default_rays")]
+    pub rays_per_region: u32,
+    /// Sampled mode: seed of the ray sampler. Default 1.
+    #[serde(default = "default_seed")]
+    pub seed: u64,
+    /// View regions of at most this many grid cells get a visible set (the
+    /// union of their cells'); larger regions count every object. Default 16.
+    #[serde(default = "default_region_cells")]
+    pub max_region_cells: u32,
+}
+
+/// The two accepted forms of the `visibility` field.
+#[derive(JsonSchema)]
+#[serde(untagged)]
+#[allow(dead_code)] // only its schema is used; `de_visibility` parses both forms
+enum VisibilityWire {
+    /// Just the mode, every knob at its default.
+    Mode(VisibilityMode),
+    /// The mode and its knobs.
+    Params(VisibilityParams),
+}
+
+/// Reads `visibility` as a bare mode or as an object.
+fn de_visibility<'de, D: serde::Deserializer<'de>>(
+    d: D,
+) -> std::result::Result<VisibilityParams, D::Error> {
+    use serde::de::Error as _;
+    let v = serde_json::Value::deserialize(d)?;
+    if v.is_string() {
+        let mode: VisibilityMode = serde_json::from_value(v).map_err(|e| {
+            D::Error::custom(format!(
+                "visibility: {e} (expected none, conservative, sampled or precomputed)"
+            ))
+        })?;
+        return Ok(VisibilityParams {
+            mode,
+            ..VisibilityParams::default()
+        });
+    }
+    serde_json::from_value(v).map_err(|e| D::Error::custom(format!("visibility: {e}")))
+}
+
+/// Levels-of-detail parameters.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct LodParams {
+    /// Use the levels of detail the scene carries (glTF `MSFT_lod`). Default true.
+    #[serde(default = "default_true")]
+    pub enabled: bool,
+    /// Generate levels by mesh simplification for objects without levels;
+    /// needs a scene with geometry. Default false.
+    #[serde(default)]
+    pub generate: bool,
+    /// Generated levels below the full-detail one. Default 3.
+    #[serde(default = "default_lod_levels")]
+    pub levels: u32,
+    /// Each generated level keeps this fraction of the previous level's
+    /// triangles. Default 0.5.
+    #[serde(default = "default_lod_ratio")]
+    pub ratio: f64,
+    /// Objects with fewer triangles get no generated levels. Default 256.
+    #[serde(default = "default_lod_min_triangles")]
+    pub min_triangles: u64,
 }
 
 /// View space: a box of viewpoints and a pitch range of view directions.
@@ -215,6 +319,27 @@ fn default_true() -> bool {
 fn default_max_tex() -> u32 {
     2048
 }
+fn default_sample_spacing() -> f64 {
+    4.0
+}
+fn default_rays() -> u32 {
+    8192
+}
+fn default_seed() -> u64 {
+    1
+}
+fn default_region_cells() -> u32 {
+    16
+}
+fn default_lod_levels() -> u32 {
+    3
+}
+fn default_lod_ratio() -> f64 {
+    0.5
+}
+fn default_lod_min_triangles() -> u64 {
+    256
+}
 
 impl Default for Camera {
     fn default() -> Self {
@@ -267,6 +392,30 @@ impl Default for MemoryParams {
     }
 }
 
+impl Default for VisibilityParams {
+    fn default() -> Self {
+        VisibilityParams {
+            mode: VisibilityMode::None,
+            sample_spacing_m: default_sample_spacing(),
+            rays_per_region: default_rays(),
+            seed: default_seed(),
+            max_region_cells: default_region_cells(),
+        }
+    }
+}
+
+impl Default for LodParams {
+    fn default() -> Self {
+        LodParams {
+            enabled: true,
+            generate: false,
+            levels: default_lod_levels(),
+            ratio: default_lod_ratio(),
+            min_triangles: default_lod_min_triangles(),
+        }
+    }
+}
+
 /// Upper bound on the number of 3D cells of the problem view space grid; more
 /// would not finish in reasonable time or memory.
 pub const MAX_CELLS: f64 = 1.0e6;
@@ -287,6 +436,8 @@ impl Job {
             problem_views: ProblemViewParams::default(),
             candidates: CandidateParams::default(),
             memory: MemoryParams::default(),
+            visibility: VisibilityParams::default(),
+            lod: LodParams::default(),
         }
     }
 
@@ -457,6 +608,51 @@ impl Job {
                 "memory.max_texture_size",
                 format!("{} must be in [4, 16384]", m.max_texture_size),
             ));
+        }
+        let v = &self.visibility;
+        if !(v.sample_spacing_m.is_finite() && v.sample_spacing_m >= 0.05) {
+            return Err(bad(
+                "visibility.sample_spacing_m",
+                format!("{} must be at least 0.05 m", v.sample_spacing_m),
+            ));
+        }
+        let samples: f64 = (0..3)
+            .map(|a| {
+                let cell = (vs.max[a] - vs.min[a])
+                    / ((vs.max[a] - vs.min[a]) / pv.cell_size).ceil().max(1.0);
+                (cell / v.sample_spacing_m).ceil().max(1.0)
+            })
+            .product();
+        if v.mode == VisibilityMode::Conservative && samples > 4096.0 {
+            return Err(bad(
+                "visibility.sample_spacing_m",
+                format!(
+                    "{} m makes {samples:.0} sample points per view cell (at most 4096); use a larger spacing",
+                    v.sample_spacing_m
+                ),
+            ));
+        }
+        if !(1..=10_000_000).contains(&v.rays_per_region) {
+            return Err(bad(
+                "visibility.rays_per_region",
+                format!("{} must be between 1 and 10000000", v.rays_per_region),
+            ));
+        }
+        if !(1..=1_000_000).contains(&v.max_region_cells) {
+            return Err(bad(
+                "visibility.max_region_cells",
+                format!("{} must be between 1 and 1000000", v.max_region_cells),
+            ));
+        }
+        let l = &self.lod;
+        if l.levels > 8 {
+            return Err(bad(
+                "lod.levels",
+                format!("{} must be at most 8", l.levels),
+            ));
+        }
+        if !(l.ratio.is_finite() && l.ratio > 0.0 && l.ratio < 1.0) {
+            return Err(bad("lod.ratio", format!("{} must be in (0, 1)", l.ratio)));
         }
         Ok(())
     }

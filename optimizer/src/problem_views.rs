@@ -689,6 +689,7 @@ mod tests {
                 max: DVec3::splat(501.0),
                 triangles: 1,
                 draw_calls: 1,
+                lods: Vec::new(),
             }],
         };
         let h2 = Hierarchy::build(&tiny);

@@ -24,6 +24,27 @@ pub struct Object {
     pub triangles: u64,
     /// Draw calls (glTF primitives of the mesh).
     pub draw_calls: u32,
+    /// Levels of detail, finest first, or empty when the object has none.
+    /// When present, level 0 is the object itself (its `triangles` and
+    /// `draw_calls`), and level `i` is drawn while the object's screen
+    /// coverage is at least `lods[i].min_coverage` and below level `i − 1`'s;
+    /// below the last level's threshold the object is not drawn (glTF
+    /// `MSFT_lod` with `MSFT_screencoverage`). Every level lies within the
+    /// object's bounds.
+    pub lods: Vec<LodLevel>,
+}
+
+/// One level of detail of an object.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct LodLevel {
+    /// Smallest screen coverage (projected bounding-sphere area over screen
+    /// area, in `[0, 1]`) at which this level is drawn.
+    pub min_coverage: f64,
+    /// Triangles of this level.
+    pub triangles: u64,
+    /// Draw calls of this level.
+    pub draw_calls: u32,
 }
 
 impl Object {
@@ -74,8 +95,16 @@ impl Scene {
                     "coordinates beyond 1e9 m",
                 ));
             }
+            validate_lods(o).map_err(|m| {
+                Error::bad(format!("{source}: object {id} ({}): lods", o.name), m)
+            })?;
         }
         Ok(())
+    }
+
+    /// True when some object has levels of detail.
+    pub fn has_lods(&self) -> bool {
+        self.objects.iter().any(|o| !o.lods.is_empty())
     }
 
     /// Bounds of all objects.
@@ -106,10 +135,45 @@ impl Scene {
                     max: o.max.to_array(),
                     triangles: o.triangles,
                     draw_calls: o.draw_calls,
+                    lods: o.lods.clone(),
                 })
                 .collect(),
         }
     }
+}
+
+/// Checks an object's levels: level 0 is the object itself, thresholds are
+/// finite, in `[0, 1]` and strictly decreasing.
+fn validate_lods(o: &Object) -> std::result::Result<(), String> {
+    let Some(first) = o.lods.first() else {
+        return Ok(());
+    };
+    if first.triangles != o.triangles || first.draw_calls != o.draw_calls {
+        return Err(format!(
+            "level 0 ({} triangles, {} draw calls) must be the object itself ({} triangles, {} draw calls)",
+            first.triangles, first.draw_calls, o.triangles, o.draw_calls
+        ));
+    }
+    if o.lods.len() > 32 {
+        return Err(format!("{} levels (at most 32)", o.lods.len()));
+    }
+    let mut last = f64::INFINITY;
+    for (i, l) in o.lods.iter().enumerate() {
+        if !(l.min_coverage.is_finite() && (0.0..=1.0).contains(&l.min_coverage)) {
+            return Err(format!(
+                "level {i}: min_coverage {} must be in [0, 1]",
+                l.min_coverage
+            ));
+        }
+        if l.min_coverage >= last {
+            return Err(format!(
+                "level {i}: min_coverage {} must be below the previous level's {last}",
+                l.min_coverage
+            ));
+        }
+        last = l.min_coverage;
+    }
+    Ok(())
 }
 
 /// JSON scene summary (`schemas/scene.schema.json`): objects with bounds and
@@ -136,6 +200,10 @@ pub struct SummaryObject {
     pub triangles: u64,
     /// Draw calls.
     pub draw_calls: u32,
+    /// Levels of detail, finest first (level 0 is the object itself); empty
+    /// when the object has none.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub lods: Vec<LodLevel>,
 }
 
 impl SceneSummary {
@@ -153,6 +221,7 @@ impl SceneSummary {
                     max: DVec3::from_array(o.max),
                     triangles: o.triangles,
                     draw_calls: o.draw_calls,
+                    lods: o.lods,
                 })
                 .collect(),
         };

@@ -34,6 +34,7 @@ pub fn synthetic_city(seed: u64, nx: u32, nz: u32) -> Scene {
                     max: p + size,
                     triangles: 50 + rng.next_u64() % 5000,
                     draw_calls: 1 + (rng.next_u64() % 3) as u32,
+                    lods: Vec::new(),
                 });
             }
         }

@@ -1,0 +1,1 @@
+//! Levels of detail (placeholder; see the module being written).

@@ -1,0 +1,2 @@
+//! Ray casting against the scene's triangles (placeholder; see the module
+//! being written).
