@@ -8,6 +8,13 @@
 //! which case the impostor is drawn instead (if its cluster sphere meets the
 //! frustum). It does not use the enclosing frusta, the candidates or the
 //! greedy state: only the scene, the job and the placement.
+//!
+//! With visibility, each view counts only the objects of its grid cell's
+//! potentially visible set (the same set the placement used), and the set
+//! itself is checked: rays cast from the view point through a grid over the
+//! image, and rays aimed at points on the nearest objects the set culled,
+//! find objects that are actually visible; any such object missing from the
+//! set is counted in `visibility.missed_objects` (0 in conservative mode).
 
 use std::collections::HashMap;
 
@@ -19,13 +26,17 @@ use serde::{Deserialize, Serialize};
 use crate::cost::{Cost, CostModel};
 use crate::error::{Error, Result};
 use crate::geom::{Aabb, Sphere, Vdi, ViewFrustum, face_direction};
+use crate::geometry::{AlphaMode, SceneGeometry};
 use crate::hierarchy::Hierarchy;
 use crate::impostor_model::ViewCell;
-use crate::job::Job;
+use crate::input::SceneInput;
+use crate::job::{Job, VisibilityMode};
 use crate::placement::{Placement, ViewCellJson};
 use crate::problem_views::{Grid, leaf_level};
+use crate::raycast::RayCaster;
 use crate::rng::Rng;
 use crate::scene::Scene;
+use crate::visibility::{ObjectSet, Visibility};
 
 /// Options of an evaluation.
 #[derive(Clone, Copy, Debug)]
@@ -34,6 +45,65 @@ pub struct EvalOptions {
     pub views: u64,
     /// Seed of the view sampler.
     pub seed: u64,
+    /// Visibility check: rays per view through a grid over the image (0: none).
+    pub check_rays: u32,
+    /// Visibility check: culled objects in the view frustum, nearest first,
+    /// probed per view with rays aimed at points of their surfaces.
+    pub check_objects: u32,
+}
+
+impl Default for EvalOptions {
+    fn default() -> Self {
+        EvalOptions {
+            views: 10_000,
+            seed: 1,
+            check_rays: 256,
+            check_objects: 16,
+        }
+    }
+}
+
+/// The check of the visible sets (`evaluation.visibility`).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct VisibilityCheck {
+    /// The job's visibility mode.
+    pub mode: VisibilityMode,
+    /// Grid cells the sampled views lie in.
+    pub cells: u64,
+    /// Mean size of the visible set of a view's cell.
+    pub mean_visible_objects: f64,
+    /// Mean share of the scene's objects in a view's visible set.
+    pub mean_visible_fraction: f64,
+    /// Views whose visible set was checked by ray casting (0 without
+    /// geometry).
+    pub views_checked: u64,
+    /// Rays cast for the check.
+    pub rays: u64,
+    /// (view, object) pairs where a ray from the view point reached an
+    /// object that is not in the view's visible set. Must be 0 in
+    /// conservative mode.
+    pub missed_objects: u64,
+    /// Views with at least one missed object.
+    pub views_with_misses: u64,
+    /// Missed objects found by the image-grid rays.
+    pub missed_by_image_rays: u64,
+    /// Missed objects found by rays aimed at culled objects.
+    pub missed_by_probe_rays: u64,
+    /// The first few misses (by view index).
+    pub examples: Vec<MissedObject>,
+}
+
+/// An object seen from a view point but missing from the view's visible set.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct MissedObject {
+    /// Index of the sampled view.
+    pub view: u64,
+    /// The view point.
+    pub eye: [f64; 3],
+    /// The object id.
+    pub object: u32,
 }
 
 /// The evaluation report (`eval.json`).
@@ -74,6 +144,9 @@ pub struct Evaluation {
     /// Image error of the impostors (`evaluate --images N`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub image: Option<crate::image_eval::ImageReport>,
+    /// The visibility used and its check (absent without visibility).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub visibility: Option<VisibilityCheck>,
 }
 
 struct PreparedImpostor {
@@ -229,7 +302,10 @@ fn prepare(scene: &Scene, job: &Job, placement: &Placement, source: &str) -> Res
     })
 }
 
-/// Exact time of one view.
+/// Exact time of one view. Objects outside `visible` (when given) are not
+/// drawn; those of them in the frustum are listed in `culled` with their
+/// distance, when asked.
+#[allow(clippy::too_many_arguments)] // one view: its frustum and its CPV's data
 fn view_time(
     scene: &Scene,
     h: &Hierarchy,
@@ -238,6 +314,8 @@ fn view_time(
     replaced: &[u32],
     impostors: &[u32],
     prepared: &Prepared,
+    visible: Option<&ObjectSet>,
+    mut culled: Option<&mut Vec<(f64, u32)>>,
 ) -> f64 {
     let eye = f.eye();
     let mut cost = Cost::default();
@@ -258,6 +336,12 @@ fn view_time(
                     if replaced.binary_search(&o).is_ok()
                         || !f.intersects_sphere(s.center, s.radius)
                     {
+                        continue;
+                    }
+                    if visible.is_some_and(|v| !v.contains(o)) {
+                        if let Some(c) = culled.as_deref_mut() {
+                            c.push((eye.distance(s.center) - s.radius, o));
+                        }
                         continue;
                     }
                     let ob = &scene.objects[o as usize];
@@ -281,10 +365,160 @@ fn view_time(
     model.frame_time(cost)
 }
 
-/// Evaluates `placement` for `job` over `scene`. `source` names the placement
-/// file in errors.
+/// Per object, its range of instances in the geometry.
+fn instance_ranges(geom: &SceneGeometry, objects: usize) -> Vec<(usize, usize)> {
+    let mut r = vec![(0usize, 0usize); objects];
+    let mut i = 0;
+    while i < geom.instances.len() {
+        let o = geom.instances[i].object as usize;
+        let mut j = i;
+        while j < geom.instances.len() && geom.instances[j].object as usize == o {
+            j += 1;
+        }
+        if let Some(slot) = r.get_mut(o) {
+            *slot = (i, j);
+        }
+        i = j;
+    }
+    r
+}
+
+/// A point on a surface of object `o` that faces `eye` (or is double-sided)
+/// and lies in the frustum, drawn at random; `None` after a few misses.
+fn probe_point(
+    geom: &SceneGeometry,
+    range: (usize, usize),
+    f: &ViewFrustum,
+    rng: &mut Rng,
+) -> Option<DVec3> {
+    let insts = &geom.instances[range.0..range.1];
+    let total: usize = insts
+        .iter()
+        .map(|i| geom.meshes[i.mesh as usize].indices.len() / 3)
+        .sum();
+    if total == 0 {
+        return None;
+    }
+    for _ in 0..8 {
+        let mut t = (rng.next_u64() % total as u64) as usize;
+        let inst = insts.iter().find(|i| {
+            let n = geom.meshes[i.mesh as usize].indices.len() / 3;
+            if t < n {
+                true
+            } else {
+                t -= n;
+                false
+            }
+        })?;
+        let mesh = &geom.meshes[inst.mesh as usize];
+        let mat = &geom.materials[mesh.material as usize];
+        let v = |k: usize| {
+            inst.transform
+                .transform_point3(mesh.positions[mesh.indices[3 * t + k] as usize].as_dvec3())
+        };
+        let (a, b, c) = (v(0), v(1), v(2));
+        let (mut u, mut w) = (rng.f64(), rng.f64());
+        if u + w > 1.0 {
+            (u, w) = (1.0 - u, 1.0 - w);
+        }
+        let p = a + (b - a) * u + (c - a) * w;
+        let n = (b - a).cross(c - a);
+        let facing = n.dot(p - f.eye()) < 0.0;
+        if (!facing && !mat.double_sided) || mat.alpha_mode == AlphaMode::Blend {
+            continue;
+        }
+        if f.distance(p) <= 0.0 {
+            return Some(p);
+        }
+    }
+    None
+}
+
+/// Objects visible from the view point (rays through the image and at the
+/// nearest culled objects) that `visible` lacks: `(object, by_probe)`.
+#[allow(clippy::too_many_arguments)] // one view and its check budget
+fn check_view(
+    caster: &RayCaster,
+    geom: &SceneGeometry,
+    ranges: &[(usize, usize)],
+    f: &ViewFrustum,
+    fov_deg: f64,
+    aspect: f64,
+    visible: &ObjectSet,
+    culled: &mut [(f64, u32)],
+    opts: &EvalOptions,
+    rng: &mut Rng,
+) -> (Vec<(u32, bool)>, u64) {
+    let mut missed: Vec<(u32, bool)> = Vec::new();
+    let mut rays = 0u64;
+    let (right, up, fwd) = f.basis();
+    let tv = (fov_deg.to_radians() * 0.5).tan();
+    let th = tv * aspect;
+    let side = f64::from(opts.check_rays).sqrt().ceil() as u32;
+    for j in 0..side {
+        for i in 0..side {
+            if u64::from(j * side + i) >= u64::from(opts.check_rays) {
+                break;
+            }
+            let x = ((f64::from(i) + rng.f64()) / f64::from(side) * 2.0 - 1.0) * th;
+            let y = ((f64::from(j) + rng.f64()) / f64::from(side) * 2.0 - 1.0) * tv;
+            let dir = fwd + right * x + up * y;
+            rays += 1;
+            caster.trace(f.eye(), dir, 0.0, f64::INFINITY, &mut |o| {
+                if !visible.contains(o) && !missed.iter().any(|m| m.0 == o) {
+                    missed.push((o, false));
+                }
+            });
+        }
+    }
+    culled.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+    for &(_, o) in culled.iter().take(opts.check_objects as usize) {
+        if missed.iter().any(|m| m.0 == o) {
+            continue;
+        }
+        for _ in 0..2 {
+            let Some(p) = probe_point(geom, ranges[o as usize], f, rng) else {
+                break;
+            };
+            rays += 1;
+            if caster.segment_clear(f.eye(), p) {
+                missed.push((o, true));
+                break;
+            }
+        }
+    }
+    (missed, rays)
+}
+
+/// Evaluates `placement` for `job` over a `scene` without geometry (the job
+/// must not need any). `source` names the placement file in errors.
 pub fn evaluate(
     scene: &Scene,
+    job: &Job,
+    placement: &Placement,
+    opts: &EvalOptions,
+    source: &str,
+) -> Result<Evaluation> {
+    let input = SceneInput::from_scene(scene, job)?;
+    evaluate_input(&input, job, placement, opts, source)
+}
+
+/// One sampled view's outcome.
+struct ViewResult {
+    time: f64,
+    cpv: u32,
+    outside: bool,
+    visible: usize,
+    missed: Vec<(u32, bool)>,
+    rays: u64,
+    checked: bool,
+}
+
+/// Evaluates `placement` for `job` over a prepared scene (the same levels of
+/// detail and visibility the placement used). `source` names the placement
+/// file in errors.
+pub fn evaluate_input(
+    input: &SceneInput,
     job: &Job,
     placement: &Placement,
     opts: &EvalOptions,
@@ -296,21 +530,48 @@ pub fn evaluate(
             format!("{} must be between 1 and 100000000", opts.views),
         ));
     }
+    if opts.check_rays > 1_000_000 || opts.check_objects > 100_000 {
+        return Err(Error::bad(
+            "--check-rays/--check-objects",
+            "at most 1000000 rays and 100000 objects per view",
+        ));
+    }
+    let scene = &input.scene;
     let prepared = prepare(scene, job, placement, source)?;
     let h = Hierarchy::build(scene);
+    let vis = Visibility::new(job, scene, &h, input.visibility_inputs(job))?;
     let model = CostModel::new(job);
     let t_max = job.target_frame_time_ms;
     let [w, hgt] = job.camera.resolution;
     let aspect = f64::from(w) / f64::from(hgt);
     let (lo, hi) = (job.vs_min(), job.vs_max());
     let pitch = job.view_space.pitch_deg.map(f64::to_radians);
-    // (time, cpv or MAX, impostor outside its cell)
-    let samples: Vec<(f64, u32, bool)> = (0..opts.views)
+    let view_of = |i: u64| {
+        let mut rng = Rng::new(opts.seed.wrapping_mul(0x2545_F491_4F6C_DD1D) ^ i);
+        let eye = rng.in_box(lo, hi);
+        let dir = rng.direction_in_pitch(pitch[0], pitch[1]);
+        (eye, dir, rng)
+    };
+    let mut cells_used: Vec<[u32; 3]> = Vec::new();
+    if let Some(v) = &vis {
+        cells_used = (0..opts.views)
+            .into_par_iter()
+            .map(|i| prepared.grid.cell_of(view_of(i).0).expect("inside"))
+            .collect();
+        cells_used.sort_unstable();
+        cells_used.dedup();
+        v.prefetch(&cells_used);
+    }
+    let check = vis.is_some() && (opts.check_rays > 0 || opts.check_objects > 0);
+    let caster = if check { input.caster() } else { None };
+    let ranges = match (&input.geometry, caster) {
+        (Some(g), Some(_)) => instance_ranges(g, scene.objects.len()),
+        _ => Vec::new(),
+    };
+    let samples: Vec<ViewResult> = (0..opts.views)
         .into_par_iter()
         .map(|i| {
-            let mut rng = Rng::new(opts.seed.wrapping_mul(0x2545_F491_4F6C_DD1D) ^ i);
-            let eye = rng.in_box(lo, hi);
-            let dir = rng.direction_in_pitch(pitch[0], pitch[1]);
+            let (eye, dir, mut rng) = view_of(i);
             let f = ViewFrustum::new(eye, dir, job.camera.fov_deg, aspect);
             let cell = prepared
                 .grid
@@ -331,21 +592,95 @@ pub fn evaluate(
             let outside = imps
                 .iter()
                 .any(|&i| !prepared.impostors[i as usize].cell.contains_point(eye));
-            let t = view_time(scene, &h, &model, &f, replaced, imps, &prepared);
-            (t, cpv.unwrap_or(u32::MAX), outside)
+            let set = vis.as_ref().map(|v| &v.cell(cell).set);
+            let mut culled = Vec::new();
+            let t = view_time(
+                scene,
+                &h,
+                &model,
+                &f,
+                replaced,
+                imps,
+                &prepared,
+                set.map(|s| &**s),
+                caster.is_some().then_some(&mut culled),
+            );
+            let (missed, rays, checked) = match (caster, set, &input.geometry) {
+                (Some(c), Some(s), Some(g)) => {
+                    let (m, r) = check_view(
+                        c,
+                        g,
+                        &ranges,
+                        &f,
+                        job.camera.fov_deg,
+                        aspect,
+                        s,
+                        &mut culled,
+                        opts,
+                        &mut rng,
+                    );
+                    (m, r, true)
+                }
+                _ => (Vec::new(), 0, false),
+            };
+            ViewResult {
+                time: t,
+                cpv: cpv.unwrap_or(u32::MAX),
+                outside,
+                visible: set.map_or(scene.objects.len(), |s| s.count()),
+                missed,
+                rays,
+                checked,
+            }
         })
         .collect();
-    let mut times: Vec<f64> = samples.iter().map(|s| s.0).collect();
+    let mut times: Vec<f64> = samples.iter().map(|s| s.time).collect();
     times.sort_by(f64::total_cmp);
     let pct = |p: f64| times[((times.len() - 1) as f64 * p).round() as usize];
     let over = |t: f64| t > t_max * (1.0 + 1e-12);
     let solved = |c: u32| c == u32::MAX || prepared.cpv_solved[c as usize];
     let in_solved: Vec<f64> = samples
         .iter()
-        .filter(|s| solved(s.1))
-        .map(|s| s.0)
+        .filter(|s| solved(s.cpv))
+        .map(|s| s.time)
         .collect();
     let within: Vec<f64> = times.iter().copied().filter(|&t| !over(t)).collect();
+    let visibility = vis.as_ref().map(|_| {
+        let n = samples.len() as f64;
+        let objects = scene.objects.len().max(1) as f64;
+        let mean_visible = samples.iter().map(|s| s.visible as f64).sum::<f64>() / n;
+        let mut examples = Vec::new();
+        for (i, s) in samples.iter().enumerate() {
+            for &(o, _) in &s.missed {
+                if examples.len() < 10 {
+                    examples.push(MissedObject {
+                        view: i as u64,
+                        eye: view_of(i as u64).0.to_array(),
+                        object: o,
+                    });
+                }
+            }
+        }
+        VisibilityCheck {
+            mode: job.visibility.mode,
+            cells: cells_used.len() as u64,
+            mean_visible_objects: mean_visible,
+            mean_visible_fraction: mean_visible / objects,
+            views_checked: samples.iter().filter(|s| s.checked).count() as u64,
+            rays: samples.iter().map(|s| s.rays).sum(),
+            missed_objects: samples.iter().map(|s| s.missed.len() as u64).sum(),
+            views_with_misses: samples.iter().filter(|s| !s.missed.is_empty()).count() as u64,
+            missed_by_image_rays: samples
+                .iter()
+                .map(|s| s.missed.iter().filter(|m| !m.1).count() as u64)
+                .sum(),
+            missed_by_probe_rays: samples
+                .iter()
+                .map(|s| s.missed.iter().filter(|m| m.1).count() as u64)
+                .sum(),
+            examples,
+        }
+    });
     Ok(Evaluation {
         views: opts.views,
         seed: opts.seed,
@@ -354,17 +689,18 @@ pub fn evaluate(
         p50_ms: pct(0.5),
         p99_ms: pct(0.99),
         mean_ms: times.iter().sum::<f64>() / times.len() as f64,
-        violations: samples.iter().filter(|s| over(s.0)).count() as u64,
+        violations: samples.iter().filter(|s| over(s.time)).count() as u64,
         violations_in_solved: in_solved.iter().filter(|&&t| over(t)).count() as u64,
         max_ms_in_solved: in_solved.iter().copied().fold(0.0, f64::max),
-        views_in_cpvs: samples.iter().filter(|s| s.1 != u32::MAX).count() as u64,
-        views_in_unsolved_cpvs: samples.iter().filter(|s| !solved(s.1)).count() as u64,
-        impostors_outside_view_cell: samples.iter().filter(|s| s.2).count() as u64,
+        views_in_cpvs: samples.iter().filter(|s| s.cpv != u32::MAX).count() as u64,
+        views_in_unsolved_cpvs: samples.iter().filter(|s| !solved(s.cpv)).count() as u64,
+        impostors_outside_view_cell: samples.iter().filter(|s| s.outside).count() as u64,
         mean_slack_ms: if within.is_empty() {
             0.0
         } else {
             within.iter().map(|t| t_max - t).sum::<f64>() / within.len() as f64
         },
         image: None,
+        visibility,
     })
 }

@@ -479,6 +479,11 @@ impl ViewFrustum {
         self.eye
     }
 
+    /// The camera basis: right, up and forward unit vectors.
+    pub fn basis(&self) -> (DVec3, DVec3, DVec3) {
+        (self.right, self.up, self.fwd)
+    }
+
     /// Exact Euclidean distance from `p` to the frustum (0 inside).
     pub fn distance(&self, p: DVec3) -> f64 {
         let w = p - self.eye;

@@ -73,7 +73,7 @@ pub struct VisibilityParams {
     pub mode: VisibilityMode,
     /// Conservative mode: the largest spacing of the sample points in a view
     /// cell, metres; occluders shrink by half the actual spacing per axis.
-    /// Default 4.
+    /// Default 6.
     #[serde(default = "default_sample_spacing")]
     pub sample_spacing_m: f64,
     /// Sampled mode: rays cast from each view cell. Default 8192.
@@ -320,7 +320,7 @@ fn default_max_tex() -> u32 {
     2048
 }
 fn default_sample_spacing() -> f64 {
-    4.0
+    6.0
 }
 fn default_rays() -> u32 {
     8192
@@ -646,10 +646,7 @@ impl Job {
         }
         let l = &self.lod;
         if l.levels > 8 {
-            return Err(bad(
-                "lod.levels",
-                format!("{} must be at most 8", l.levels),
-            ));
+            return Err(bad("lod.levels", format!("{} must be at most 8", l.levels)));
         }
         if !(l.ratio.is_finite() && l.ratio > 0.0 && l.ratio < 1.0) {
             return Err(bad("lod.ratio", format!("{} must be in (0, 1)", l.ratio)));

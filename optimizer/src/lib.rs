@@ -25,6 +25,7 @@ pub mod greedy;
 pub mod hierarchy;
 pub mod image_eval;
 pub mod impostor_model;
+pub mod input;
 pub mod job;
 pub mod lod;
 pub mod pipeline;
@@ -36,6 +37,7 @@ pub mod rng;
 pub mod scene;
 pub mod schema;
 pub mod testutil;
+pub mod visibility;
 
 pub use error::{Error, Result};
 

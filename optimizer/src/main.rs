@@ -4,10 +4,12 @@ use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
 use clap::{Parser, Subcommand};
-use optimizer::evaluate::{EvalOptions, evaluate};
-use optimizer::job::{Job, MemoryParams};
-use optimizer::pipeline::{PlaceOptions, place};
+use optimizer::evaluate::{EvalOptions, evaluate_input};
+use optimizer::input::{SceneInput, needs_geometry};
+use optimizer::job::{Job, MemoryParams, VisibilityMode};
+use optimizer::pipeline::{Control, PlaceOptions, place_input};
 use optimizer::placement::Placement;
+use optimizer::visibility::pvs::{PvsCell, PvsFile};
 use optimizer::{Error, Result, bake, citygen, geometry, gltf_load, image_eval, schema};
 
 /// Automatic impostor placement for guaranteed frame rates and low memory.
@@ -43,6 +45,9 @@ enum Command {
         /// Print each stage's wall time to stderr.
         #[arg(short, long)]
         verbose: bool,
+        /// Precomputed PVS file (for `"visibility": "precomputed"`).
+        #[arg(long)]
+        pvs: Option<PathBuf>,
     },
     /// Check a placement independently with random views and exact frusta.
     Evaluate {
@@ -79,6 +84,31 @@ enum Command {
         /// Write the worst view's renders side by side as a PNG into this directory.
         #[arg(long)]
         dump: Option<PathBuf>,
+        /// Precomputed PVS file (for `"visibility": "precomputed"`).
+        #[arg(long)]
+        pvs: Option<PathBuf>,
+        /// Visibility check: rays per view through the image (0: none).
+        #[arg(long, default_value_t = 256)]
+        check_rays: u32,
+        /// Visibility check: culled objects in the view probed per view.
+        #[arg(long, default_value_t = 16)]
+        check_objects: u32,
+    },
+    /// Compute the potentially visible set of every view-space cell of a job
+    /// (its `visibility` mode: conservative or sampled) and write it as a PVS
+    /// file, reusable with `"visibility": "precomputed"`.
+    Pvs {
+        /// Scene: .glb or .gltf.
+        scene: PathBuf,
+        /// Job JSON.
+        #[arg(long)]
+        job: PathBuf,
+        /// Output PVS JSON (default: standard output).
+        #[arg(short, long)]
+        out: Option<PathBuf>,
+        /// Worker threads (default: all cores).
+        #[arg(long)]
+        threads: Option<usize>,
     },
     /// Render a placement's impostors into layered, alpha-masked quads and
     /// write them as one GLB with texture atlases.
@@ -210,6 +240,43 @@ fn json(value: &impl serde::Serialize) -> Result<Vec<u8>> {
     optimizer::to_json_bytes(value)
 }
 
+fn is_gltf(path: &Path) -> bool {
+    path.extension()
+        .and_then(|e| e.to_str())
+        .is_some_and(|e| e.eq_ignore_ascii_case("glb") || e.eq_ignore_ascii_case("gltf"))
+}
+
+/// Loads the scene (and its geometry and a PVS file when the job needs
+/// them) and prepares it for `job`. With `geometry_if_gltf`, a glTF
+/// scene's geometry is loaded even if the job could do without it (the
+/// evaluation's visibility check uses it). Errors about the job name
+/// `job_path`.
+fn load_input(
+    scene: &Path,
+    pvs: Option<&Path>,
+    job: &Job,
+    job_path: &str,
+    geometry_if_gltf: bool,
+) -> Result<SceneInput> {
+    let s = gltf_load::load_scene_file(scene)?;
+    let geometry = if needs_geometry(job) || (geometry_if_gltf && is_gltf(scene)) {
+        Some(geometry::load_geometry_file(scene)?)
+    } else {
+        None
+    };
+    let pvs = match pvs {
+        Some(p) => {
+            let bytes = std::fs::read(p).map_err(|e| Error::io(p, e))?;
+            Some(PvsFile::from_json(&bytes, &p.display().to_string())?)
+        }
+        None => None,
+    };
+    SceneInput::new(s, geometry, pvs, job).map_err(|e| match e {
+        Error::BadInput { what, message } if what == "job" => Error::bad(job_path, message),
+        e => e,
+    })
+}
+
 fn run(cli: Cli) -> Result<ExitCode> {
     match cli.command {
         Command::Place {
@@ -220,13 +287,14 @@ fn run(cli: Cli) -> Result<ExitCode> {
             stats,
             prune,
             verbose,
+            pvs,
         } => {
             set_threads(threads)?;
             let job_path = job.display().to_string();
             let job = read_job(&job)?;
-            let scene = gltf_load::load_scene_file(&scene)?;
-            let output = place(
-                &scene,
+            let input = load_input(&scene, pvs.as_deref(), &job, &job_path, false)?;
+            let output = place_input(
+                &input,
                 &job,
                 &PlaceOptions {
                     prune,
@@ -234,6 +302,7 @@ fn run(cli: Cli) -> Result<ExitCode> {
                     verbose,
                     max_pairs: None,
                 },
+                &Control::default(),
             )
             .map_err(|e| match e {
                 Error::BadInput { what, message } if what == "job" => Error::bad(job_path, message),
@@ -270,14 +339,38 @@ fn run(cli: Cli) -> Result<ExitCode> {
             impostors,
             tolerance,
             dump,
+            pvs,
+            check_rays,
+            check_objects,
         } => {
             set_threads(threads)?;
+            let job_path = job.display().to_string();
             let job = read_job(&job)?;
             let scene_path = scene;
-            let scene = gltf_load::load_scene_file(&scene_path)?;
+            let check = job.visibility.mode != VisibilityMode::None;
+            let input = load_input(&scene_path, pvs.as_deref(), &job, &job_path, check)?;
             let name = placement.display().to_string();
             let p = read_placement(&placement)?;
-            let mut eval = evaluate(&scene, &job, &p, &EvalOptions { views, seed }, &name)?;
+            let opts = EvalOptions {
+                views,
+                seed,
+                check_rays,
+                check_objects,
+            };
+            let mut eval = evaluate_input(&input, &job, &p, &opts, &name)?;
+            if let Some(v) = &eval.visibility {
+                eprintln!(
+                    "visibility {:?}: {} cells, {:.1} visible objects per view ({:.2} %), \
+                     {} missed objects over {} checked views ({} rays)",
+                    v.mode,
+                    v.cells,
+                    v.mean_visible_objects,
+                    100.0 * v.mean_visible_fraction,
+                    v.missed_objects,
+                    v.views_checked,
+                    v.rays
+                );
+            }
             if images > 0 {
                 let geom = geometry::load_geometry_file(&scene_path)?;
                 let layers = match &impostors {
@@ -359,6 +452,72 @@ fn run(cli: Cli) -> Result<ExitCode> {
                 rep.memory_bytes as f64 / 1e6,
                 rep.placement_memory_bytes as f64 / 1e6,
                 start.elapsed().as_secs_f64()
+            );
+            Ok(ExitCode::SUCCESS)
+        }
+        Command::Pvs {
+            scene,
+            job,
+            out,
+            threads,
+        } => {
+            set_threads(threads)?;
+            let job_path = job.display().to_string();
+            let job = read_job(&job)?;
+            if !matches!(
+                job.visibility.mode,
+                VisibilityMode::Conservative | VisibilityMode::Sampled
+            ) {
+                return Err(Error::bad(
+                    format!("{job_path}: visibility"),
+                    "must be \"conservative\" or \"sampled\" to compute a PVS",
+                ));
+            }
+            let input = load_input(&scene, None, &job, &job_path, false)?;
+            let start = std::time::Instant::now();
+            let h = optimizer::hierarchy::Hierarchy::build(&input.scene);
+            let vis = optimizer::visibility::Visibility::new(
+                &job,
+                &input.scene,
+                &h,
+                input.visibility_inputs(&job),
+            )?
+            .expect("a visibility mode");
+            let grid = vis.grid().clone();
+            let cells: Vec<[u32; 3]> = (0..grid.counts[2])
+                .flat_map(|z| {
+                    (0..grid.counts[1])
+                        .flat_map(move |y| (0..grid.counts[0]).map(move |x| [x, y, z]))
+                })
+                .collect();
+            vis.prefetch(&cells);
+            let file = PvsFile {
+                objects: input.scene.objects.len() as u64,
+                cells: cells
+                    .iter()
+                    .map(|&c| {
+                        let b = grid.cell_box(c, c.map(|x| x + 1));
+                        PvsCell {
+                            min: b.min.to_array(),
+                            max: b.max.to_array(),
+                            visible: vis.cell(c).set.iter().collect(),
+                        }
+                    })
+                    .collect(),
+            };
+            write_output(out.as_deref(), &json(&file)?)?;
+            let st = vis.stats();
+            let prep: f64 = input.seconds.iter().map(|s| s.seconds).sum();
+            eprintln!(
+                "{} cells, {:.1} visible objects per cell ({:.2} % of {}), preparation {:.2} s, \
+                 sets {:.2} s wall ({:.2} s CPU)",
+                st.cells_computed,
+                st.mean_visible_objects,
+                100.0 * st.mean_visible_fraction,
+                input.scene.objects.len(),
+                prep,
+                start.elapsed().as_secs_f64(),
+                st.cpu_seconds
             );
             Ok(ExitCode::SUCCESS)
         }

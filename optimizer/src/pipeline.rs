@@ -10,6 +10,7 @@ use crate::candidates::{self, Candidates};
 use crate::greedy::{self, Selection};
 use crate::hierarchy::Hierarchy;
 use crate::impostor_model::ViewCell;
+use crate::input::SceneInput;
 use crate::job::Job;
 use crate::placement::{
     DirectionsJson, PlacedCpv, PlacedImpostor, Placement, RegionJson, SphereJson, StageTime, Stats,
@@ -17,6 +18,7 @@ use crate::placement::{
 };
 use crate::problem_views::{self, Context, ProblemViews};
 use crate::scene::Scene;
+use crate::visibility::Visibility;
 use crate::{Error, Result};
 
 /// Options of a placement run.
@@ -139,8 +141,10 @@ impl Drop for Stages {
     }
 }
 
-/// Places impostors for `job` over a validated `scene`. Fails only when the
-/// job needs more memory than the pair budget allows ([`Error::BadInput`]).
+/// Places impostors for `job` over a validated `scene` without geometry (the
+/// job must not need any, see [`crate::input::needs_geometry`]). Fails when
+/// the job needs more memory than the pair budget allows
+/// ([`Error::BadInput`]).
 pub fn place(scene: &Scene, job: &Job, opts: &PlaceOptions) -> Result<PlaceOutput> {
     place_controlled(scene, job, opts, &Control::default())
 }
@@ -152,7 +156,21 @@ pub fn place_controlled(
     opts: &PlaceOptions,
     ctl: &Control,
 ) -> Result<PlaceOutput> {
+    let input = SceneInput::from_scene(scene, job)?;
+    place_input(&input, job, opts, ctl)
+}
+
+/// Places impostors for `job` over a prepared scene (levels of detail,
+/// visibility inputs), with progress reports and cancellation.
+pub fn place_input(
+    input: &SceneInput,
+    job: &Job,
+    opts: &PlaceOptions,
+    ctl: &Control,
+) -> Result<PlaceOutput> {
+    let scene = &input.scene;
     let mut st = Stages::new(opts.progress, opts.verbose);
+    st.times.extend(input.seconds.iter().cloned());
     ctl.progress("hierarchy", 0.0);
     st.begin("building the object hierarchy");
     let hierarchy = Hierarchy::build(scene);
@@ -160,10 +178,12 @@ pub fn place_controlled(
     ctl.check()?;
     ctl.progress("problem_views", 0.01);
 
+    let visibility = Visibility::new(job, scene, &hierarchy, input.visibility_inputs(job))?;
     st.begin("approximating the problem view space");
     let mut ctx = Context::new(scene, &hierarchy, job);
     ctx.pair_budget = opts.max_pairs.unwrap_or(problem_views::MAX_PAIRS);
     ctx.cancel = ctl.cancel;
+    ctx.visibility = visibility.as_ref();
     let pv = problem_views::approximate(&ctx, job);
     st.end("problem_views");
     if ctx.over_budget() {
@@ -238,6 +258,8 @@ pub fn place_controlled(
         unsolved_cpvs: placement.summary.unsolved_cpvs,
         seconds: std::mem::take(&mut st.times),
         peak_rss_bytes: peak_rss_bytes(),
+        visibility: visibility.as_ref().map(Visibility::stats),
+        lod: ctx.lod_stats(input.lod.clone()),
     };
     ctl.progress("placement", 1.0);
     Ok(PlaceOutput { placement, stats })
@@ -389,6 +411,7 @@ mod tests {
                 &EvalOptions {
                     views: 3000,
                     seed: 9,
+                    ..EvalOptions::default()
                 },
                 "p.json",
             )
@@ -434,6 +457,7 @@ mod tests {
         let opts = EvalOptions {
             views: 3000,
             seed: 5,
+            ..EvalOptions::default()
         };
         let honest = evaluate(&scene, &job, &p, &opts, "p.json").unwrap();
         assert_eq!(honest.violations_in_solved, 0);
@@ -560,6 +584,7 @@ mod tests {
             &EvalOptions {
                 views: 2000,
                 seed: 1,
+                ..EvalOptions::default()
             },
             "p.json",
         )

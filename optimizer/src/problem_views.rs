@@ -20,6 +20,7 @@ use crate::geom::{Aabb, Cone, Vdi, enclosing_cone, frustum_half_diagonal};
 use crate::hierarchy::Hierarchy;
 use crate::job::Job;
 use crate::scene::Scene;
+use crate::visibility::{ObjectSet, Visibility};
 
 /// The grid of minimum-size 3D cells over the view space.
 #[derive(Clone, Debug)]
@@ -212,6 +213,12 @@ pub struct Context<'a> {
     /// When set to true, the approximation and candidate generation stop
     /// early (the caller reports the cancellation).
     pub cancel: Option<&'a AtomicBool>,
+    /// From-region visibility: regions count only their potentially
+    /// visible objects.
+    pub visibility: Option<&'a Visibility<'a>>,
+    /// Per level of detail, how often it was chosen for a (region, object)
+    /// pair; the last slot counts objects too small to be drawn.
+    pub lod_levels: Vec<AtomicU64>,
 }
 
 /// The default budget of (CPV, cluster) pairs. Every pair costs about 50
@@ -236,7 +243,44 @@ impl<'a> Context<'a> {
             pairs: AtomicU64::new(0),
             pair_budget: MAX_PAIRS,
             cancel: None,
+            visibility: None,
+            lod_levels: (0..=crate::scene::MAX_LODS)
+                .map(|_| AtomicU64::new(0))
+                .collect(),
         }
+    }
+
+    /// Level-of-detail counters (`None` when no object has levels).
+    pub fn lod_stats(
+        &self,
+        generated: Option<crate::lod::LodReport>,
+    ) -> Option<crate::placement::LodStats> {
+        let with = self
+            .scene
+            .objects
+            .iter()
+            .filter(|o| !o.lods.is_empty())
+            .count();
+        if with == 0 && generated.is_none() {
+            return None;
+        }
+        let levels = self
+            .scene
+            .objects
+            .iter()
+            .map(|o| o.lods.len())
+            .max()
+            .unwrap_or(0);
+        let mut chosen: Vec<u64> = self.lod_levels[..levels]
+            .iter()
+            .map(|a| a.load(AtomicOrdering::Relaxed))
+            .collect();
+        chosen.push(self.lod_levels[crate::scene::MAX_LODS].load(AtomicOrdering::Relaxed));
+        Some(crate::placement::LodStats {
+            objects_with_lods: with as u64,
+            chosen_levels: chosen,
+            generated,
+        })
     }
 
     /// True once the recorded pairs exceed the budget.
@@ -257,7 +301,8 @@ impl<'a> Context<'a> {
 }
 
 /// Per-region costs: every object's cost seen from the region's closest point
-/// and every cluster's sum.
+/// and every cluster's sum. Objects outside the region's potentially visible
+/// set cost nothing.
 pub struct RegionCosts {
     /// Per object id.
     pub objects: Vec<Cost>,
@@ -266,14 +311,19 @@ pub struct RegionCosts {
 }
 
 impl RegionCosts {
-    /// Costs for `region`.
-    pub fn new(ctx: &Context, region: &Aabb) -> RegionCosts {
+    /// Costs for `region`, counting only the objects of `visible` (all when
+    /// `None`).
+    pub fn new(ctx: &Context, region: &Aabb, visible: Option<&ObjectSet>) -> RegionCosts {
         let objects: Vec<Cost> = ctx
             .scene
             .objects
             .iter()
             .zip(&ctx.hierarchy.object_spheres)
-            .map(|(o, s)| {
+            .enumerate()
+            .map(|(id, (o, s))| {
+                if visible.is_some_and(|v| !v.contains(id as u32)) {
+                    return Cost::default();
+                }
                 ctx.model.geometry(
                     o.draw_calls,
                     o.triangles,
@@ -328,7 +378,8 @@ pub fn enclosed_cost(
         if cone.contains_sphere(s.center, s.radius) {
             if let Some(out) = emit.as_deref_mut() {
                 for m in n..node.subtree_end {
-                    if replaceable(m) {
+                    let c = costs.nodes[m as usize];
+                    if (c.cpu > 0.0 || c.gpu > 0.0) && replaceable(m) {
                         out.push((m, costs.nodes[m as usize]));
                     }
                 }
@@ -443,7 +494,8 @@ fn process(
         };
     }
     let region = node.aabb;
-    let costs = RegionCosts::new(ctx, &region);
+    let visible = ctx.visibility.and_then(|v| v.region(node.lo, node.hi));
+    let costs = RegionCosts::new(ctx, &region, visible.as_deref());
     let open = ancestors(parent_problems);
     let mut problems: Vec<(Vdi, f64)> = Vec::new();
     let mut cones = 0u64;
@@ -582,9 +634,9 @@ pub fn approximate(ctx: &Context, job: &Job) -> ProblemViews {
 }
 
 /// Estimated frame time of views in `region` with directions in `vdi`, using
-/// the enclosing frustum (for tests and baselines).
+/// the enclosing frustum and every object (for tests and baselines).
 pub fn enclosing_time(ctx: &Context, region: &Aabb, vdi: &Vdi) -> f64 {
-    let costs = RegionCosts::new(ctx, region);
+    let costs = RegionCosts::new(ctx, region, None);
     let cone = enclosing_cone(region, vdi, ctx.half_diagonal);
     ctx.model
         .frame_time(enclosed_cost(ctx, &costs, &cone, region, None))

@@ -34,6 +34,9 @@ pub struct Object {
     pub lods: Vec<LodLevel>,
 }
 
+/// Most levels of detail an object may have.
+pub const MAX_LODS: usize = 32;
+
 /// One level of detail of an object.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
@@ -95,9 +98,8 @@ impl Scene {
                     "coordinates beyond 1e9 m",
                 ));
             }
-            validate_lods(o).map_err(|m| {
-                Error::bad(format!("{source}: object {id} ({}): lods", o.name), m)
-            })?;
+            validate_lods(o)
+                .map_err(|m| Error::bad(format!("{source}: object {id} ({}): lods", o.name), m))?;
         }
         Ok(())
     }
@@ -154,8 +156,8 @@ fn validate_lods(o: &Object) -> std::result::Result<(), String> {
             first.triangles, first.draw_calls, o.triangles, o.draw_calls
         ));
     }
-    if o.lods.len() > 32 {
-        return Err(format!("{} levels (at most 32)", o.lods.len()));
+    if o.lods.len() > MAX_LODS {
+        return Err(format!("{} levels (at most {MAX_LODS})", o.lods.len()));
     }
     let mut last = f64::INFINITY;
     for (i, l) in o.lods.iter().enumerate() {

@@ -55,3 +55,56 @@ pub fn synthetic_job(nx: u32, nz: u32) -> Job {
     job.target_frame_time_ms = 4.0;
     job
 }
+
+/// The geometry of a scene whose objects are solid boxes: each object is a
+/// closed, outward-facing cuboid filling its bounds (one mesh per object,
+/// one opaque single-sided material).
+pub fn box_geometry(scene: &Scene) -> crate::geometry::SceneGeometry {
+    use crate::geometry::{Instance, Material, MeshData, SceneGeometry};
+    use glam::{DAffine3, Vec3};
+    let mut meshes = Vec::new();
+    let mut instances = Vec::new();
+    for (o, ob) in scene.objects.iter().enumerate() {
+        let (lo, hi) = (ob.min.as_vec3(), ob.max.as_vec3());
+        let c = |x: bool, y: bool, z: bool| {
+            Vec3::new(
+                if x { hi.x } else { lo.x },
+                if y { hi.y } else { lo.y },
+                if z { hi.z } else { lo.z },
+            )
+        };
+        let (f, t) = (false, true);
+        let quads = [
+            [c(f, f, t), c(t, f, t), c(t, t, t), c(f, t, t)],
+            [c(t, f, f), c(f, f, f), c(f, t, f), c(t, t, f)],
+            [c(t, f, t), c(t, f, f), c(t, t, f), c(t, t, t)],
+            [c(f, f, f), c(f, f, t), c(f, t, t), c(f, t, f)],
+            [c(f, t, t), c(t, t, t), c(t, t, f), c(f, t, f)],
+            [c(f, f, f), c(t, f, f), c(t, f, t), c(f, f, t)],
+        ];
+        let mut m = MeshData::default();
+        for q in quads {
+            let n = (q[1] - q[0]).cross(q[3] - q[0]).normalize_or_zero();
+            let base = m.positions.len() as u32;
+            for p in q {
+                m.positions.push(p);
+                m.normals.push(n);
+            }
+            m.indices
+                .extend([base, base + 1, base + 2, base, base + 2, base + 3]);
+        }
+        meshes.push(m);
+        instances.push(Instance {
+            object: o as u32,
+            mesh: o as u32,
+            transform: DAffine3::IDENTITY,
+        });
+    }
+    SceneGeometry {
+        meshes,
+        instances,
+        materials: vec![Material::default()],
+        textures: Vec::new(),
+        objects: scene.objects.len(),
+    }
+}

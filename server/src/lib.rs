@@ -333,6 +333,7 @@ impl AppState {
             &optimizer::evaluate::EvalOptions {
                 views: self.0.cfg.eval_views,
                 seed: 1,
+                ..optimizer::evaluate::EvalOptions::default()
             },
             "placement",
         )?;
