@@ -646,10 +646,7 @@ impl Job {
         }
         let l = &self.lod;
         if l.levels > 8 {
-            return Err(bad(
-                "lod.levels",
-                format!("{} must be at most 8", l.levels),
-            ));
+            return Err(bad("lod.levels", format!("{} must be at most 8", l.levels)));
         }
         if !(l.ratio.is_finite() && l.ratio > 0.0 && l.ratio < 1.0) {
             return Err(bad("lod.ratio", format!("{} must be in (0, 1)", l.ratio)));
