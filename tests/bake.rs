@@ -94,6 +94,34 @@ fn bake_validates_and_looks_like_the_geometry() {
 }
 
 #[test]
+fn gen_city_lod_validates_and_carries_levels() {
+    let dir = tmp("gen-city-lod");
+    let glb = dir.join("lod.glb");
+    let o = run(&["gen-city", "--scale", "0.02", "--lod", "-o", s(&glb)]);
+    assert_eq!(code(&o), 0, "{}", stderr(&o));
+    let issues = validate(&glb);
+    assert_eq!(issues["numErrors"], 0, "{issues}");
+    assert_eq!(issues["numWarnings"], 0, "{issues}");
+    let summary = dir.join("lod.json");
+    let o = run(&[
+        "gen-city",
+        "--scale",
+        "0.02",
+        "--lod",
+        "--summary",
+        "-o",
+        s(&summary),
+    ]);
+    assert_eq!(code(&o), 0, "{}", stderr(&o));
+    let objects = read_json(&summary)["objects"].as_array().unwrap().clone();
+    let with_levels = objects.iter().filter(|o| o.get("lods").is_some()).count();
+    assert!(
+        with_levels > 0 && with_levels < objects.len(),
+        "{with_levels}"
+    );
+}
+
+#[test]
 fn bake_rejects_scenes_without_geometry_and_foreign_placements() {
     let dir = tmp("bake-bad");
     let job = root().join("fixtures/jobs/city-small.json");

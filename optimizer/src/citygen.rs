@@ -8,21 +8,59 @@
 //! `z ∈ [0, D]` with the ground at `y = 0`; the full city (scale 1) is about
 //! 1500 × 1000 m with about 5,300 objects and 10 M triangles, like the
 //! paper's Vienna model. The street centre lines are free of objects.
+//!
+//! # Levels of detail (`lod`, `gen-city --lod`)
+//!
+//! With [`CityParams::lod`] the street objects — trees, lamps, benches, cars
+//! and litter bins — get two coarser levels (glTF `MSFT_lod`), built by the
+//! same prototype functions with fewer rings and sides (tree crowns half
+//! the rings and 3/8 of the sides, then a quarter and 3/16, e.g. 16 × 32 →
+//! 8 × 12 → 4 × 6; trunks 6 then 4 sides; lamps and bins 6 then 3 sides;
+//! cars half then a quarter of the rings (at least 3) and sides; straight
+//! cylinders one segment; benches merge their slats, then drop legs and
+//! arms). The levels are extra nodes with
+//! the object's transform, neither scene roots nor children, named
+//! `<object>_lod1` and `<object>_lod2`; their meshes come after every
+//! full-detail mesh. Buildings, kiosks and the ground get none: buildings
+//! are the occluders of the visibility stage, and an object with levels is
+//! never an occluder. Every level lies within the full-detail level's box,
+//! so objects, their ids, bounds and full-detail geometry are those of the
+//! city without levels (same seed and scale), and without `lod` the file is
+//! byte-identical to what it was before levels existed.
+//!
+//! `MSFT_screencoverage` comes from each level's geometric error `e_k`: a
+//! bound on the distance between its surface and level 0's, in local metres
+//! (per part, the sum of both tessellations' chord errors against the smooth
+//! surface; for the bench, the largest gap closed or part dropped), times
+//! the instance's largest scale. Level `k` may be drawn from the distance
+//! `d_k = e_k · f / ε` at which that error projects to `ε = 1` pixel with the
+//! default camera (512 pixels high, 45° field of view: `f = 256 / tan 22.5°`);
+//! level `k − 1`'s value is the screen coverage of the object's bounding
+//! sphere at `d_k` (projected area over 512², as
+//! [`crate::geom::projected_area_px`]). The last level's value is 0: it is
+//! never culled, so levels change cost, never visibility.
 
+use std::collections::BTreeMap;
 use std::f32::consts::{PI, TAU};
 
+use serde_json::json;
+
 use crate::error::{Error, Result};
-use crate::glb::{Geometry, GlbBuilder, Material, Node};
+use crate::glb::{Geometry, GeometryId, GlbBuilder, Material, MeshPrimitive, Node};
 use crate::rng::Rng;
 
 /// Generator parameters.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct CityParams {
-    /// Seed: the same seed and scale give byte-identical output.
+    /// Seed: the same seed, scale and `lod` give byte-identical output.
     pub seed: u64,
     /// Fraction of the full city's area, in `(0, 4]`; lengths scale by its
     /// square root.
     pub scale: f64,
+    /// Give street objects `MSFT_lod` levels of detail (see the module
+    /// docs). Objects, their ids and their full-detail geometry do not
+    /// change.
+    pub lod: bool,
 }
 
 impl Default for CityParams {
@@ -30,6 +68,7 @@ impl Default for CityParams {
         CityParams {
             seed: 1,
             scale: 1.0,
+            lod: false,
         }
     }
 }
@@ -333,53 +372,86 @@ fn building(nx: u32, ny: u32, sills: bool, pitched: bool) -> (MeshData, MeshData
     (walls, roof)
 }
 
-fn tree(rings: u32, sides: u32) -> (MeshData, MeshData) {
+/// Tree crown radii (an ellipsoid).
+const CROWN: V3 = [2.6, 3.0, 2.6];
+/// Trunk radius.
+const TRUNK_R: f32 = 0.25;
+
+fn tree(rings: u32, sides: u32, trunk_sides: u32, trunk_segments: u32) -> (MeshData, MeshData) {
     let mut trunk = MeshData::default();
-    trunk.cylinder([0.0, 0.0, 0.0], 0.25, 3.5, 8, 4);
+    trunk.cylinder([0.0, 0.0, 0.0], TRUNK_R, 3.5, trunk_sides, trunk_segments);
     let mut crown = MeshData::default();
-    crown.ellipsoid([0.0, 5.5, 0.0], [2.6, 3.0, 2.6], rings, sides);
+    crown.ellipsoid([0.0, 5.5, 0.0], CROWN, rings, sides);
     (trunk, crown)
 }
 
-fn lamp(sides: u32) -> (MeshData, MeshData) {
+/// Lamp pole and head radii.
+const POLE_R: f32 = 0.09;
+const HEAD_R: f32 = 0.3;
+
+fn lamp(sides: u32, pole_segments: u32, head_segments: u32) -> (MeshData, MeshData) {
     let mut pole = MeshData::default();
-    pole.cylinder([0.0, 0.0, 0.0], 0.09, 6.0, sides, 10);
+    pole.cylinder([0.0, 0.0, 0.0], POLE_R, 6.0, sides, pole_segments);
     pole.cuboid([-0.05, 5.8, -0.05], [1.2, 5.9, 0.05]);
     let mut head = MeshData::default();
-    head.cylinder([1.2, 5.4, 0.0], 0.3, 0.5, sides, 3);
+    head.cylinder([1.2, 5.4, 0.0], HEAD_R, 0.5, sides, head_segments);
     (pole, head)
 }
 
-fn bench() -> MeshData {
+/// A bench: level 0 has five seat slats, four back slats, two legs and an
+/// arm on each side; level 1 merges the slats into one seat slab and one
+/// back slab; level 2 is the two slabs alone.
+fn bench(level: u32) -> MeshData {
     let mut m = MeshData::default();
-    for i in 0..5 {
-        let z = i as f32 * 0.09;
-        m.cuboid([0.0, 0.42, z], [1.8, 0.46, z + 0.07]);
+    if level == 0 {
+        for i in 0..5 {
+            let z = i as f32 * 0.09;
+            m.cuboid([0.0, 0.42, z], [1.8, 0.46, z + 0.07]);
+        }
+        for i in 0..4 {
+            let y = 0.55 + i as f32 * 0.11;
+            m.cuboid([0.0, y, 0.46], [1.8, y + 0.08, 0.5]);
+        }
+    } else {
+        m.cuboid([0.0, 0.42, 0.0], [1.8, 0.46, 0.43]);
+        m.cuboid([0.0, 0.55, 0.46], [1.8, 0.96, 0.5]);
     }
-    for i in 0..4 {
-        let y = 0.55 + i as f32 * 0.11;
-        m.cuboid([0.0, y, 0.46], [1.8, y + 0.08, 0.5]);
-    }
-    for x in [0.1, 1.6] {
-        m.cuboid([x, 0.0, 0.0], [x + 0.1, 0.42, 0.1]);
-        m.cuboid([x, 0.0, 0.36], [x + 0.1, 0.95, 0.5]);
-        m.cuboid([x, 0.6, 0.0], [x + 0.1, 0.66, 0.5]);
+    if level < 2 {
+        for x in [0.1, 1.6] {
+            m.cuboid([x, 0.0, 0.0], [x + 0.1, 0.42, 0.1]);
+            m.cuboid([x, 0.0, 0.36], [x + 0.1, 0.95, 0.5]);
+            m.cuboid([x, 0.6, 0.0], [x + 0.1, 0.66, 0.5]);
+        }
     }
     m
 }
 
-fn car(rings: u32, sides: u32) -> (MeshData, MeshData, MeshData) {
+/// Car body, glass and wheel radii.
+const BODY: V3 = [2.2, 0.5, 0.9];
+const GLASS: V3 = [1.2, 0.45, 0.8];
+const WHEEL_R: f32 = 0.35;
+
+fn car(rings: u32, sides: u32, wheel_segments: u32) -> (MeshData, MeshData, MeshData) {
     let mut body = MeshData::default();
-    body.ellipsoid([0.0, 0.75, 0.0], [2.2, 0.5, 0.9], rings, sides);
+    body.ellipsoid([0.0, 0.75, 0.0], BODY, rings, sides);
     let mut glass = MeshData::default();
-    glass.ellipsoid([-0.2, 1.2, 0.0], [1.2, 0.45, 0.8], rings / 2 + 2, sides);
+    glass.ellipsoid([-0.2, 1.2, 0.0], GLASS, rings / 2 + 2, sides);
     let mut wheels = MeshData::default();
     for (x, z) in [(-1.4, 0.8), (1.4, 0.8), (-1.4, -0.8), (1.4, -0.8)] {
         // Wheels as short vertical cylinders lying on their side are not
         // needed for placement; upright discs keep the code simple.
-        wheels.cylinder([x, 0.0, z], 0.35, 0.6, sides / 2, 2);
+        wheels.cylinder([x, 0.0, z], WHEEL_R, 0.6, sides / 2, wheel_segments);
     }
     (body, glass, wheels)
+}
+
+/// Litter bin radius.
+const BIN_R: f32 = 0.3;
+
+fn bin(sides: u32, segments: u32) -> MeshData {
+    let mut m = MeshData::default();
+    m.cylinder([0.0, 0.0, 0.0], BIN_R, 0.9, sides, segments);
+    m
 }
 
 fn kiosk() -> (MeshData, MeshData) {
@@ -400,6 +472,251 @@ fn kiosk() -> (MeshData, MeshData) {
     (walls, roof)
 }
 
+/// One level of a street prototype: the arguments of its prototype function.
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Street {
+    Tree {
+        rings: u32,
+        sides: u32,
+        trunk_sides: u32,
+        trunk_segments: u32,
+    },
+    Lamp {
+        sides: u32,
+        pole_segments: u32,
+        head_segments: u32,
+    },
+    Bench {
+        level: u32,
+    },
+    Car {
+        rings: u32,
+        sides: u32,
+        wheel_segments: u32,
+    },
+    Bin {
+        sides: u32,
+        segments: u32,
+    },
+}
+
+/// A bound on the distance between a `rings × sides` tessellation of an
+/// ellipsoid of radii `r` and the ellipsoid, both ways. Before the scaling
+/// `A = diag(r)` every face is a planar polygon inscribed in the unit sphere
+/// at distance `h` from the centre. A point `p` of a face and its radial
+/// projection `p/|p|` on the sphere map to points `(1/|p| − 1)·|A p| ≤
+/// (1/h − 1)·max_v |A v|` apart (`v` the face's vertices, `|p| ≥ h`); a
+/// point `q` of the sphere and the face point `p` in its direction, likewise.
+/// They are also at most `(1 − h)·max(r)` apart (`A` stretches distances
+/// by at most `max(r)`). The bound is the largest over the faces of the
+/// smaller of the two.
+fn ellipsoid_chord(r: V3, rings: u32, sides: u32) -> f64 {
+    let mut unit = MeshData::default();
+    unit.ellipsoid([0.0; 3], [1.0; 3], rings, sides);
+    let radii = glam::DVec3::new(r[0].into(), r[1].into(), r[2].into());
+    let p = |i: u32| {
+        let [x, y, z] = unit.positions[i as usize];
+        glam::DVec3::new(x.into(), y.into(), z.into())
+    };
+    unit.indices
+        .chunks_exact(3)
+        .map(|t| {
+            let v = [p(t[0]), p(t[1]), p(t[2])];
+            let n = (v[1] - v[0]).cross(v[2] - v[0]).normalize_or_zero();
+            let h = n.dot(v[0]).abs();
+            let far = v.iter().map(|v| (*v * radii).length()).fold(0.0, f64::max);
+            let stretched = if h > 1e-9 { (1.0 / h - 1.0) * far } else { far };
+            stretched.min((1.0 - h) * radii.max_element())
+        })
+        .fold(0.0, f64::max)
+}
+
+/// Largest distance of a regular `sides`-gon inscribed in a circle of
+/// radius `r` from the circle (the sagitta); a straight cylinder's segments
+/// add none.
+fn circle_chord(r: f32, sides: u32) -> f64 {
+    f64::from(r) * (1.0 - (std::f64::consts::PI / f64::from(sides)).cos())
+}
+
+impl Street {
+    /// The two coarser levels of a full-detail prototype: fewer rings and
+    /// sides, one segment per straight cylinder; merged, then fewer boxes
+    /// for the bench.
+    fn coarser(self) -> [Street; 2] {
+        match self {
+            Street::Tree { rings, sides, .. } => [
+                Street::Tree {
+                    rings: rings / 2,
+                    sides: sides * 3 / 8,
+                    trunk_sides: 6,
+                    trunk_segments: 1,
+                },
+                Street::Tree {
+                    rings: rings / 4,
+                    sides: sides * 3 / 16,
+                    trunk_sides: 4,
+                    trunk_segments: 1,
+                },
+            ],
+            Street::Lamp { .. } => [6, 3].map(|sides| Street::Lamp {
+                sides,
+                pole_segments: 1,
+                head_segments: 1,
+            }),
+            Street::Bench { .. } => [1, 2].map(|level| Street::Bench { level }),
+            Street::Car { rings, sides, .. } => [
+                Street::Car {
+                    rings: (rings / 2).max(3),
+                    sides: sides / 2,
+                    wheel_segments: 1,
+                },
+                Street::Car {
+                    rings: (rings / 4).max(3),
+                    sides: sides / 4,
+                    wheel_segments: 1,
+                },
+            ],
+            Street::Bin { .. } => [6, 3].map(|sides| Street::Bin { sides, segments: 1 }),
+        }
+    }
+
+    /// The parts, one per primitive, in the prototype's primitive order.
+    fn parts(self) -> Vec<MeshData> {
+        match self {
+            Street::Tree {
+                rings,
+                sides,
+                trunk_sides,
+                trunk_segments,
+            } => {
+                let (trunk, crown) = tree(rings, sides, trunk_sides, trunk_segments);
+                vec![trunk, crown]
+            }
+            Street::Lamp {
+                sides,
+                pole_segments,
+                head_segments,
+            } => {
+                let (pole, head) = lamp(sides, pole_segments, head_segments);
+                vec![pole, head]
+            }
+            Street::Bench { level } => vec![bench(level)],
+            Street::Car {
+                rings,
+                sides,
+                wheel_segments,
+            } => {
+                let (body, glass, wheels) = car(rings, sides, wheel_segments);
+                vec![body, glass, wheels]
+            }
+            Street::Bin { sides, segments } => vec![bin(sides, segments)],
+        }
+    }
+
+    /// Per part: the largest distance of the part's surface from the smooth
+    /// surface it approximates (local metres; boxes are exact). For the
+    /// bench, whose levels remove boxes, the bound on the distance to level
+    /// 0 instead: level 1's slabs lie within 0.02 m (half a slab's
+    /// thickness) of the slats, and level 2 also drops the legs and arms,
+    /// whose farthest points (the feet) are 0.43 m from the seat slab.
+    fn chords(self) -> Vec<f64> {
+        match self {
+            Street::Tree {
+                rings,
+                sides,
+                trunk_sides,
+                ..
+            } => vec![
+                circle_chord(TRUNK_R, trunk_sides),
+                ellipsoid_chord(CROWN, rings, sides),
+            ],
+            Street::Lamp { sides, .. } => {
+                vec![circle_chord(POLE_R, sides), circle_chord(HEAD_R, sides)]
+            }
+            Street::Bench { level } => vec![[0.0, 0.02, 0.45][level.min(2) as usize]],
+            Street::Car { rings, sides, .. } => vec![
+                ellipsoid_chord(BODY, rings, sides),
+                ellipsoid_chord(GLASS, rings / 2 + 2, sides),
+                circle_chord(WHEEL_R, sides / 2),
+            ],
+            Street::Bin { sides, .. } => vec![circle_chord(BIN_R, sides)],
+        }
+    }
+
+    /// A bound on the distance between this level's surface and the
+    /// full-detail level's (local metres): per part, both lie within their
+    /// chords of the same smooth surface, so within the sum; the largest
+    /// over the parts.
+    fn error_from(self, full: Street) -> f64 {
+        self.chords()
+            .iter()
+            .zip(full.chords())
+            .map(|(a, b)| a + b)
+            .fold(0.0, f64::max)
+    }
+}
+
+/// Focal length of the default camera (512 px high, 45° vertical field of
+/// view), pixels: the camera the generated screen coverages assume.
+fn default_focal_px() -> f64 {
+    256.0 / 22.5f64.to_radians().tan()
+}
+
+/// Screen area of the default camera (512 × 512), pixels.
+const SCREEN_PX: f64 = 512.0 * 512.0;
+
+/// Largest projected geometric error of a level where it is drawn, pixels.
+const LOD_ERROR_PX: f64 = 1.0;
+
+/// The levels of detail of one street prototype mesh.
+#[derive(Clone, Debug)]
+struct ProtoLod {
+    /// Meshes of levels 1 and 2.
+    meshes: [u32; 2],
+    /// Errors of levels 1 and 2 against level 0, local metres.
+    errors: [f64; 2],
+    /// Local bounding box of level 0 (every level lies within it).
+    lo: [f64; 3],
+    hi: [f64; 3],
+}
+
+impl ProtoLod {
+    /// `MSFT_screencoverage` of an instance rotated by `rot` about +y and
+    /// scaled by `scale`: level `k` (`k = 1, 2`) may be drawn from the
+    /// distance where its error, scaled to the instance, projects to
+    /// [`LOD_ERROR_PX`] (`d_k = e_k · f / ε`), so level `k − 1`'s threshold is
+    /// the coverage of the instance's bounding sphere (the circumsphere of
+    /// its world box, as the loader computes it) at `d_k`; level 2 is never
+    /// culled (0).
+    fn screen_coverage(&self, rot: f32, scale: [f32; 3]) -> [f64; 3] {
+        let (sin, cos) = f64::from(rot).sin_cos();
+        let s = scale.map(f64::from);
+        let mut lo = glam::DVec3::splat(f64::INFINITY);
+        let mut hi = glam::DVec3::splat(f64::NEG_INFINITY);
+        for corner in 0..8 {
+            let pick = |axis: usize| {
+                if corner >> axis & 1 == 0 {
+                    self.lo[axis]
+                } else {
+                    self.hi[axis]
+                }
+            };
+            let (x, y, z) = (pick(0) * s[0], pick(1) * s[1], pick(2) * s[2]);
+            let w = glam::DVec3::new(x * cos + z * sin, y, -x * sin + z * cos);
+            lo = lo.min(w);
+            hi = hi.max(w);
+        }
+        let radius = (hi - lo).length() * 0.5;
+        let grow = s.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+        let f = default_focal_px();
+        let coverage = |e: f64| {
+            let d = e * grow * f / LOD_ERROR_PX;
+            crate::geom::projected_area_px(radius, d, f, SCREEN_PX) / SCREEN_PX
+        };
+        [coverage(self.errors[0]), coverage(self.errors[1]), 0.0]
+    }
+}
+
 /// Prototype mesh indices by kind.
 struct Prototypes {
     buildings: Vec<u32>,
@@ -410,9 +727,11 @@ struct Prototypes {
     kiosks: Vec<u32>,
     bins: Vec<u32>,
     ground: u32,
+    /// Levels of detail by full-detail mesh (empty without `lod`).
+    lods: BTreeMap<u32, ProtoLod>,
 }
 
-fn prototypes(b: &mut GlbBuilder, rng: &mut Rng, size: [f64; 2]) -> Result<Prototypes> {
+fn prototypes(b: &mut GlbBuilder, rng: &mut Rng, size: [f64; 2], lod: bool) -> Result<Prototypes> {
     let mat = |b: &mut GlbBuilder, name: &str, c: [f32; 3]| {
         b.add_material(&Material::new(name, [c[0], c[1], c[2], 1.0]))
     };
@@ -465,9 +784,18 @@ fn prototypes(b: &mut GlbBuilder, rng: &mut Rng, size: [f64; 2]) -> Result<Proto
             &[(walls.geometry(), Some(fm)), (roof.geometry(), Some(rm))],
         )?);
     }
+    // Street prototypes that get levels of detail, with their materials.
+    let mut street: Vec<(u32, Street, Vec<u32>)> = Vec::new();
     let mut trees = Vec::new();
     for (i, (r, s)) in [(16, 32), (24, 40), (28, 56)].into_iter().enumerate() {
-        let (trunk, crown) = tree(r, s);
+        let (trunk, crown) = tree(r, s, 8, 4);
+        let full = Street::Tree {
+            rings: r,
+            sides: s,
+            trunk_sides: 8,
+            trunk_segments: 4,
+        };
+        street.push((b.mesh_count() as u32, full, vec![bark, leaves]));
         trees.push(b.add_mesh_from(
             &format!("tree_proto_{i}"),
             &[
@@ -478,7 +806,13 @@ fn prototypes(b: &mut GlbBuilder, rng: &mut Rng, size: [f64; 2]) -> Result<Proto
     }
     let mut lamps = Vec::new();
     for (i, s) in [10u32, 14].into_iter().enumerate() {
-        let (pole, head) = lamp(s);
+        let (pole, head) = lamp(s, 10, 3);
+        let full = Street::Lamp {
+            sides: s,
+            pole_segments: 10,
+            head_segments: 3,
+        };
+        street.push((b.mesh_count() as u32, full, vec![metal, light]));
         lamps.push(b.add_mesh_from(
             &format!("lamp_proto_{i}"),
             &[
@@ -487,11 +821,22 @@ fn prototypes(b: &mut GlbBuilder, rng: &mut Rng, size: [f64; 2]) -> Result<Proto
             ],
         )?);
     }
-    let benches = vec![b.add_mesh_from("bench_proto", &[(bench().geometry(), Some(wood))])?];
+    street.push((
+        b.mesh_count() as u32,
+        Street::Bench { level: 0 },
+        vec![wood],
+    ));
+    let benches = vec![b.add_mesh_from("bench_proto", &[(bench(0).geometry(), Some(wood))])?];
     let mut cars = Vec::new();
     for (i, (r, s)) in [(10u32, 24u32), (14, 32), (18, 40)].into_iter().enumerate() {
         for (j, &paint) in paints.iter().enumerate().take(2 + i) {
-            let (body, win, wheels) = car(r, s);
+            let (body, win, wheels) = car(r, s, 2);
+            let full = Street::Car {
+                rings: r,
+                sides: s,
+                wheel_segments: 2,
+            };
+            street.push((b.mesh_count() as u32, full, vec![paint, glass, tyre]));
             cars.push(b.add_mesh_from(
                 &format!("car_proto_{i}_{j}"),
                 &[
@@ -510,12 +855,68 @@ fn prototypes(b: &mut GlbBuilder, rng: &mut Rng, size: [f64; 2]) -> Result<Proto
             (kr.geometry(), Some(metal)),
         ],
     )?];
-    let mut bin = MeshData::default();
-    bin.cylinder([0.0, 0.0, 0.0], 0.3, 0.9, 12, 2);
-    let bins = vec![b.add_mesh_from("bin_proto", &[(bin.geometry(), Some(metal))])?];
+    street.push((
+        b.mesh_count() as u32,
+        Street::Bin {
+            sides: 12,
+            segments: 2,
+        },
+        vec![metal],
+    ));
+    let bins = vec![b.add_mesh_from("bin_proto", &[(bin(12, 2).geometry(), Some(metal))])?];
     let mut g = MeshData::default();
     g.cuboid([0.0, -0.2, 0.0], [size[0] as f32, 0.0, size[1] as f32]);
     let ground = b.add_mesh_from("ground", &[(g.geometry(), Some(asphalt))])?;
+    // Levels of detail come after every full-detail mesh, so those keep
+    // their indices; a level's geometry is written once and shared by the
+    // colour variants.
+    let mut lods = BTreeMap::new();
+    let mut written: Vec<(Street, Vec<GeometryId>)> = Vec::new();
+    for (mesh, full, materials) in street.into_iter().filter(|_| lod) {
+        let coarser = full.coarser();
+        let mut meshes = [0u32; 2];
+        for (k, level) in coarser.into_iter().enumerate() {
+            let geometry = match written.iter().find(|(l, _)| *l == level) {
+                Some((_, ids)) => ids.clone(),
+                None => {
+                    let ids = level
+                        .parts()
+                        .iter()
+                        .map(|part| b.add_geometry(&part.geometry()))
+                        .collect::<Result<Vec<_>>>()?;
+                    written.push((level, ids.clone()));
+                    ids
+                }
+            };
+            let primitives: Vec<MeshPrimitive> = geometry
+                .into_iter()
+                .zip(&materials)
+                .map(|(geometry, &m)| MeshPrimitive {
+                    geometry,
+                    material: Some(m),
+                })
+                .collect();
+            meshes[k] = b.add_mesh(&format!("lod{}_of_mesh_{mesh}", k + 1), &primitives)?;
+        }
+        let mut lo = [f64::INFINITY; 3];
+        let mut hi = [f64::NEG_INFINITY; 3];
+        for p in full.parts().iter().flat_map(|part| part.positions.iter()) {
+            for i in 0..3 {
+                lo[i] = lo[i].min(f64::from(p[i]));
+                hi[i] = hi[i].max(f64::from(p[i]));
+            }
+        }
+        let errors = coarser.map(|level| level.error_from(full));
+        lods.insert(
+            mesh,
+            ProtoLod {
+                meshes,
+                errors,
+                lo,
+                hi,
+            },
+        );
+    }
     Ok(Prototypes {
         buildings,
         trees,
@@ -525,6 +926,7 @@ fn prototypes(b: &mut GlbBuilder, rng: &mut Rng, size: [f64; 2]) -> Result<Proto
         kiosks,
         bins,
         ground,
+        lods,
     })
 }
 
@@ -557,7 +959,8 @@ fn yaw(angle: f32) -> [f32; 4] {
 struct Placer<'a> {
     b: &'a mut GlbBuilder,
     roots: Vec<u32>,
-    counter: std::collections::BTreeMap<&'static str, u32>,
+    counter: BTreeMap<&'static str, u32>,
+    lods: &'a BTreeMap<u32, ProtoLod>,
 }
 
 impl Placer<'_> {
@@ -572,11 +975,34 @@ impl Placer<'_> {
         let n = self.counter.entry(kind).or_insert(0);
         let name = format!("{kind}_{:04}", *n);
         *n += 1;
-        let id = self.b.add_node(Node::new(name).with_mesh(mesh).with_trs(
-            [t[0] as f32, t[1] as f32, t[2] as f32],
-            yaw(rot),
-            scale,
-        ))?;
+        let translation = [t[0] as f32, t[1] as f32, t[2] as f32];
+        let mut node = Node::new(&name)
+            .with_mesh(mesh)
+            .with_trs(translation, yaw(rot), scale);
+        if let Some(lod) = self.lods.get(&mesh) {
+            // The levels: extra nodes at the same place, neither roots nor
+            // children, named by the object's node.
+            let mut ids = Vec::with_capacity(lod.meshes.len());
+            for (k, &m) in lod.meshes.iter().enumerate() {
+                ids.push(
+                    self.b.add_node(
+                        Node::new(format!("{name}_lod{}", k + 1))
+                            .with_mesh(m)
+                            .with_trs(translation, yaw(rot), scale),
+                    )?,
+                );
+            }
+            let coverage = lod.screen_coverage(rot, scale);
+            if !(coverage[0] > coverage[1] && coverage[1] > coverage[2]) {
+                return Err(Error::Internal(format!(
+                    "{name}: screen coverages {coverage:?} are not strictly decreasing"
+                )));
+            }
+            node = node
+                .with_extension("MSFT_lod", json!({ "ids": ids }))
+                .with_extras(json!({ "MSFT_screencoverage": coverage }));
+        }
+        let id = self.b.add_node(node)?;
         self.roots.push(id);
         Ok(())
     }
@@ -591,13 +1017,14 @@ pub fn generate(params: &CityParams) -> Result<Vec<u8>> {
     let size = city_size(scale);
     let mut rng = Rng::new(params.seed);
     let mut b = GlbBuilder::new();
-    let protos = prototypes(&mut b, &mut rng, size)?;
+    let protos = prototypes(&mut b, &mut rng, size, params.lod)?;
     let (xblocks, xstreets) = blocks_along(&mut rng, size[0]);
     let (zblocks, zstreets) = blocks_along(&mut rng, size[1]);
     let mut p = Placer {
         b: &mut b,
         roots: Vec::new(),
         counter: Default::default(),
+        lods: &protos.lods,
     };
     p.put("ground", protos.ground, [0.0; 3], 0.0, [1.0; 3])?;
     let pick = |rng: &mut Rng, v: &[u32]| v[(rng.next_u64() % v.len() as u64) as usize];
@@ -770,36 +1197,267 @@ pub fn generate(params: &CityParams) -> Result<Vec<u8>> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::geometry::load_geometry_bytes;
     use crate::gltf_load::load_scene_bytes;
+    use glam::DVec3;
+
+    fn city(seed: u64, scale: f64, lod: bool) -> Vec<u8> {
+        generate(&CityParams { seed, scale, lod }).unwrap()
+    }
+
+    /// FNV-1a, 64 bits.
+    fn fnv(bytes: &[u8]) -> u64 {
+        bytes.iter().fold(0xcbf2_9ce4_8422_2325, |h, &b| {
+            (h ^ u64::from(b)).wrapping_mul(0x0100_0000_01b3)
+        })
+    }
 
     #[test]
     fn deterministic_and_seed_dependent() {
-        let a = generate(&CityParams {
-            seed: 3,
-            scale: 0.05,
-        })
-        .unwrap();
-        let b = generate(&CityParams {
-            seed: 3,
-            scale: 0.05,
-        })
-        .unwrap();
-        let c = generate(&CityParams {
-            seed: 4,
-            scale: 0.05,
-        })
-        .unwrap();
-        assert_eq!(a, b);
-        assert_ne!(a, c);
+        let a = city(3, 0.05, false);
+        assert_eq!(a, city(3, 0.05, false));
+        assert_ne!(a, city(4, 0.05, false));
+        let l = city(3, 0.05, true);
+        assert_eq!(l, city(3, 0.05, true));
+        assert_ne!(a, l);
+    }
+
+    #[test]
+    fn output_without_lod_is_unchanged() {
+        // Hashes of the files written before levels of detail existed.
+        assert_eq!(fnv(&city(3, 0.05, false)), 0xe381_932e_921e_c078);
+        assert_eq!(fnv(&city(1, 0.1, false)), 0x0052_8bb8_3d72_762a);
+    }
+
+    fn is_street(name: &str) -> bool {
+        ["tree_", "lamp_", "bench_", "car_", "bin_"]
+            .iter()
+            .any(|k| name.starts_with(k))
+    }
+
+    #[test]
+    fn lod_city_adds_levels_only() {
+        let (plain, lod) = (city(2, 0.05, false), city(2, 0.05, true));
+        let (a, b) = (
+            load_scene_bytes(&plain, "plain").unwrap(),
+            load_scene_bytes(&lod, "lod").unwrap(),
+        );
+        assert_eq!(a.objects.len(), b.objects.len());
+        let mut with_levels = 0;
+        for (id, (x, y)) in a.objects.iter().zip(&b.objects).enumerate() {
+            assert_eq!(
+                (&x.name, x.triangles, x.draw_calls, x.min, x.max),
+                (&y.name, y.triangles, y.draw_calls, y.min, y.max),
+                "object {id}"
+            );
+            assert!(x.lods.is_empty());
+            if is_street(&y.name) {
+                with_levels += 1;
+                assert_eq!(y.lods.len(), 3, "{}", y.name);
+                assert_eq!(y.lods[0].triangles, y.triangles);
+                assert!(y.lods[1].triangles < y.lods[0].triangles);
+                assert!(y.lods[2].triangles < y.lods[1].triangles);
+                assert!(y.lods.iter().all(|l| l.draw_calls == y.draw_calls));
+                assert!(y.lods[0].min_coverage < 1.0 && y.lods[1].min_coverage > 0.0);
+                assert_eq!(y.lods[2].min_coverage, 0.0);
+            } else {
+                // Buildings (the occluders), kiosks and the ground.
+                assert!(y.lods.is_empty(), "{}", y.name);
+            }
+        }
+        assert!(with_levels > 20, "{with_levels}");
+        // The geometry (level 0) is the same, object by object.
+        let (ga, gb) = (
+            load_geometry_bytes(&plain, "plain").unwrap(),
+            load_geometry_bytes(&lod, "lod").unwrap(),
+        );
+        assert_eq!(ga.object_count(), gb.object_count());
+        assert_eq!(ga.instances.len(), gb.instances.len());
+        for (ia, ib) in ga.instances.iter().zip(&gb.instances) {
+            assert_eq!(ia.object, ib.object);
+            assert_eq!(ia.transform, ib.transform);
+            let (ma, mb) = (&ga.meshes[ia.mesh as usize], &gb.meshes[ib.mesh as usize]);
+            assert_eq!(ma.positions, mb.positions);
+            assert_eq!(ma.indices, mb.indices);
+            assert_eq!(
+                ga.materials[ma.material as usize],
+                gb.materials[mb.material as usize]
+            );
+        }
+    }
+
+    #[test]
+    fn bin_levels_hand_computed() {
+        let scene = load_scene_bytes(&city(1, 0.1, true), "lod").unwrap();
+        let bin = scene
+            .objects
+            .iter()
+            .find(|o| o.name.starts_with("bin_"))
+            .expect("a bin");
+        // A 12-sided cylinder of 2 segments with caps (72 triangles), then 6
+        // sides (24) and 3 sides (12), one segment each.
+        let tris: Vec<u64> = bin.lods.iter().map(|l| l.triangles).collect();
+        assert_eq!(tris, [72, 24, 12]);
+        // Box 0.6 × 0.9 × 0.6: r = √1.53 / 2 = 0.618466.
+        assert!((bin.radius() - 0.618_466).abs() < 1e-5, "{}", bin.radius());
+        // Level k's error: r (1 − cos(π/n_k)) + r (1 − cos(π/12)) with
+        // r = 0.3: level 1 (n = 6) 0.0504146 m, level 2 (n = 3) 0.160222 m;
+        // d_k = e_k · f at 1 px, f = 256 / tan 22.5° = 618.0387 px.
+        let f = 618.038_7;
+        let r = 0.618_466f64;
+        for (k, e) in [(1, 0.050_414_6), (2, 0.160_222_2)] {
+            let d: f64 = e * f;
+            let coverage = std::f64::consts::PI * f * f * r * r / (d * d - r * r) / 262_144.0;
+            let got = bin.lods[k - 1].min_coverage;
+            assert!(
+                (got / coverage - 1.0).abs() < 1e-4,
+                "level {k}: {got} vs {coverage}"
+            );
+        }
+    }
+
+    /// Closest distance from `p` to triangle `abc` (Ericson, Real-Time
+    /// Collision Detection, 5.1.5).
+    fn point_triangle(p: DVec3, a: DVec3, b: DVec3, c: DVec3) -> f64 {
+        let (ab, ac, ap) = (b - a, c - a, p - a);
+        let (d1, d2) = (ab.dot(ap), ac.dot(ap));
+        if d1 <= 0.0 && d2 <= 0.0 {
+            return (p - a).length();
+        }
+        let bp = p - b;
+        let (d3, d4) = (ab.dot(bp), ac.dot(bp));
+        if d3 >= 0.0 && d4 <= d3 {
+            return (p - b).length();
+        }
+        let vc = d1 * d4 - d3 * d2;
+        if vc <= 0.0 && d1 >= 0.0 && d3 <= 0.0 {
+            return (p - (a + ab * (d1 / (d1 - d3)))).length();
+        }
+        let cp = p - c;
+        let (d5, d6) = (ab.dot(cp), ac.dot(cp));
+        if d6 >= 0.0 && d5 <= d6 {
+            return (p - c).length();
+        }
+        let vb = d5 * d2 - d1 * d6;
+        if vb <= 0.0 && d2 >= 0.0 && d6 <= 0.0 {
+            return (p - (a + ac * (d2 / (d2 - d6)))).length();
+        }
+        let va = d3 * d6 - d5 * d4;
+        if va <= 0.0 && (d4 - d3) >= 0.0 && (d5 - d6) >= 0.0 {
+            let w = (d4 - d3) / ((d4 - d3) + (d5 - d6));
+            return (p - (b + (c - b) * w)).length();
+        }
+        let denom = 1.0 / (va + vb + vc);
+        let (v, w) = (vb * denom, vc * denom);
+        (p - (a + ab * v + ac * w)).length()
+    }
+
+    fn triangles(parts: &[MeshData]) -> Vec<[DVec3; 3]> {
+        parts
+            .iter()
+            .flat_map(|m| {
+                m.indices.chunks_exact(3).map(|t| {
+                    [0, 1, 2].map(|k| {
+                        let [x, y, z] = m.positions[t[k] as usize];
+                        DVec3::new(x.into(), y.into(), z.into())
+                    })
+                })
+            })
+            .collect()
+    }
+
+    /// Largest distance from sample points of `from` (corners, edge thirds,
+    /// centroids) to the surface `to`.
+    fn one_sided(from: &[[DVec3; 3]], to: &[[DVec3; 3]]) -> f64 {
+        let mut worst = 0.0f64;
+        for t in from {
+            for (i, j) in [
+                (0, 0),
+                (3, 0),
+                (0, 3),
+                (1, 1),
+                (2, 1),
+                (1, 2),
+                (2, 0),
+                (0, 2),
+            ] {
+                let (u, v) = (f64::from(i) / 3.0, f64::from(j) / 3.0);
+                let p = t[0] + (t[1] - t[0]) * u + (t[2] - t[0]) * v;
+                let d = to
+                    .iter()
+                    .map(|s| point_triangle(p, s[0], s[1], s[2]))
+                    .fold(f64::INFINITY, f64::min);
+                worst = worst.max(d);
+            }
+        }
+        worst
+    }
+
+    #[test]
+    fn level_errors_bound_the_distance_to_full_detail() {
+        let fulls = [
+            Street::Tree {
+                rings: 16,
+                sides: 32,
+                trunk_sides: 8,
+                trunk_segments: 4,
+            },
+            Street::Tree {
+                rings: 28,
+                sides: 56,
+                trunk_sides: 8,
+                trunk_segments: 4,
+            },
+            Street::Lamp {
+                sides: 14,
+                pole_segments: 10,
+                head_segments: 3,
+            },
+            Street::Bench { level: 0 },
+            Street::Car {
+                rings: 10,
+                sides: 24,
+                wheel_segments: 2,
+            },
+            Street::Car {
+                rings: 18,
+                sides: 40,
+                wheel_segments: 2,
+            },
+            Street::Bin {
+                sides: 12,
+                segments: 2,
+            },
+        ];
+        for full in fulls {
+            let f = triangles(&full.parts());
+            let (mut lo, mut hi) = (DVec3::INFINITY, DVec3::NEG_INFINITY);
+            for p in f.iter().flatten() {
+                (lo, hi) = (lo.min(*p), hi.max(*p));
+            }
+            let mut last = 0.0;
+            for level in full.coarser() {
+                let e = level.error_from(full);
+                assert!(e > last, "{level:?}: errors grow");
+                last = e;
+                let l = triangles(&level.parts());
+                assert!(l.len() < f.len());
+                // Every level lies within the full level's box.
+                for p in l.iter().flatten() {
+                    assert!(p.cmpge(lo).all() && p.cmple(hi).all(), "{level:?} {p}");
+                }
+                // The error bounds the distance both ways, and is not
+                // loose by more than a factor 3.
+                let measured = one_sided(&l, &f).max(one_sided(&f, &l));
+                assert!(measured <= e + 1e-5, "{level:?}: {measured} > {e}");
+                assert!(measured >= e / 3.0, "{level:?}: {measured} ≪ {e}");
+            }
+        }
     }
 
     #[test]
     fn small_city_counts_and_bounds() {
-        let glb = generate(&CityParams {
-            seed: 1,
-            scale: 0.1,
-        })
-        .unwrap();
+        let glb = city(1, 0.1, false);
         let scene = load_scene_bytes(&glb, "city").unwrap();
         let n = scene.objects.len();
         assert!((350..=900).contains(&n), "{n} objects");
@@ -816,9 +1474,13 @@ mod tests {
     #[test]
     fn bad_scale_is_rejected() {
         for s in [0.0, -1.0, f64::NAN, 5.0] {
-            let e = generate(&CityParams { seed: 1, scale: s })
-                .unwrap_err()
-                .to_string();
+            let e = generate(&CityParams {
+                seed: 1,
+                scale: s,
+                lod: false,
+            })
+            .unwrap_err()
+            .to_string();
             assert!(e.contains("--scale"), "{e}");
         }
     }
@@ -826,6 +1488,7 @@ mod tests {
     #[test]
     fn full_city_matches_the_papers_size() {
         let glb = generate(&CityParams::default()).unwrap();
+        assert_eq!(fnv(&glb), 0xed6f_a98a_111b_ec9b, "unchanged without --lod");
         let scene = load_scene_bytes(&glb, "city").unwrap();
         assert!(scene.objects.len() >= 5000, "{}", scene.objects.len());
         assert!(

@@ -5,9 +5,17 @@
 //! and pixels. The frame time is `frame_ms + CPU + GPU` (`sum`),
 //! `frame_ms + max(CPU, GPU)` (`max`) or `frame_ms + triangles·triangle_ns`
 //! (`primitives`, where CPU and pixels are zero).
+//!
+//! Objects with levels of detail ([`Object::lods`]) cost the level drawn at
+//! the eye distance ([`CostModel::object_view`]); over a view region the
+//! estimate uses the closest distance ([`CostModel::object_region`]). The
+//! screen coverage that selects a level is the projected bounding-sphere
+//! area over the screen area, [`CostModel::coverage`]; the pixel term always
+//! uses the object's bounding sphere, whatever the level.
 
 use crate::geom::projected_area_px;
 use crate::job::{Combine, Job};
+use crate::scene::Object;
 
 /// A cost in milliseconds, split into CPU and GPU parts.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
@@ -110,6 +118,74 @@ impl CostModel {
         }
     }
 
+    /// Screen coverage of a sphere of `radius` seen from `distance`: its
+    /// projected area over the screen area, in `[0, 1]` (1 from inside the
+    /// sphere). This is the quantity [`crate::scene::LodLevel::min_coverage`]
+    /// is compared with.
+    pub fn coverage(&self, radius: f64, distance: f64) -> f64 {
+        (self.pixels(radius, distance) / self.screen_px).clamp(0.0, 1.0)
+    }
+
+    /// The level of detail of `o` drawn when its bounding sphere (`radius`)
+    /// is at `distance` from the eye: the first level whose `min_coverage`
+    /// the coverage reaches, or `None` when the coverage is below every
+    /// threshold (the object is culled). Always `Some(0)` for an object
+    /// without levels.
+    pub fn lod_level(&self, o: &Object, radius: f64, distance: f64) -> Option<usize> {
+        if o.lods.is_empty() {
+            return Some(0);
+        }
+        let c = self.coverage(radius, distance);
+        o.lods.iter().position(|l| c >= l.min_coverage)
+    }
+
+    /// Draw calls and triangles of level `level` of `o` (level 0 is the
+    /// object itself, also when it has no levels).
+    fn level_counts(o: &Object, level: usize) -> (u32, u64) {
+        match o.lods.get(level) {
+            Some(l) => (l.draw_calls, l.triangles),
+            None => (o.draw_calls, o.triangles),
+        }
+    }
+
+    /// Exact cost of `o` seen from an eye at `distance` from its bounding
+    /// sphere's centre: the cost of the level drawn there ([`Self::lod_level`]),
+    /// zero when it is culled. The pixel term uses the bounding sphere of
+    /// `radius` whatever the level, as [`Self::geometry`] does.
+    pub fn object_view(&self, o: &Object, radius: f64, distance: f64) -> Cost {
+        match self.lod_level(o, radius, distance) {
+            None => Cost::default(),
+            Some(level) => {
+                let (calls, triangles) = Self::level_counts(o, level);
+                self.geometry(calls, triangles, radius, distance)
+            }
+        }
+    }
+
+    /// A conservative cost of `o` over a view region whose closest distance
+    /// to the bounding sphere's centre is `closest`. Coverage is largest at
+    /// `closest`, so every point of the region draws a level at least as
+    /// coarse as `lod_level(closest)` (or nothing); the result is the
+    /// component-wise maximum (CPU and GPU separately) over those levels of
+    /// each level's cost at `closest`. It bounds [`Self::object_view`] at
+    /// every distance `≥ closest`, even when a coarser level has more draw
+    /// calls or triangles than a finer one. Zero when the object is culled at
+    /// `closest` (it is then culled everywhere in the region).
+    pub fn object_region(&self, o: &Object, radius: f64, closest: f64) -> Cost {
+        let Some(first) = self.lod_level(o, radius, closest) else {
+            return Cost::default();
+        };
+        let levels = o.lods.len().max(1);
+        let mut out = Cost::default();
+        for level in first..levels {
+            let (calls, triangles) = Self::level_counts(o, level);
+            let c = self.geometry(calls, triangles, radius, closest);
+            out.cpu = out.cpu.max(c.cpu);
+            out.gpu = out.gpu.max(c.gpu);
+        }
+        out
+    }
+
     /// Cost of an impostor of `layers` quads over a cluster sphere of `radius`
     /// at `distance`: one draw call, two triangles per layer, and every layer
     /// rasterises the cluster's projected area (`c_call + c_tri·2n + c_pix·n·area`).
@@ -167,6 +243,141 @@ mod tests {
         assert_eq!(g.cpu, 0.0);
         assert!((p.frame_time(g) - 3.0).abs() < 1e-12);
         assert!((p.impostor(3, 1.0, 1.0).gpu - 12e-6).abs() < 1e-18);
+    }
+
+    /// An object of 1000 triangles and 3 calls with two coarser levels; the
+    /// last has more draw calls than the others.
+    fn lod_object() -> Object {
+        use crate::scene::LodLevel;
+        let level = |min_coverage, triangles, draw_calls| LodLevel {
+            min_coverage,
+            triangles,
+            draw_calls,
+        };
+        Object {
+            name: "o".into(),
+            min: glam::DVec3::ZERO,
+            max: glam::DVec3::ONE,
+            triangles: 1000,
+            draw_calls: 3,
+            lods: vec![
+                level(0.01, 1000, 3),
+                level(0.001, 200, 1),
+                level(0.0001, 50, 4),
+            ],
+        }
+    }
+
+    #[test]
+    fn lod_selection_hand_computed() {
+        let m = CostModel::new(&job(Combine::Sum));
+        let o = lod_object();
+        // Coverage of r = 1 at d: π f² / (d² − 1) / 512² = 4.5775 / (d² − 1).
+        let f = 256.0 / 22.5f64.to_radians().tan();
+        let k = std::f64::consts::PI * f * f / (512.0 * 512.0);
+        assert!((k - 4.5775).abs() < 1e-3);
+        assert!((m.coverage(1.0, 30.0) - k / 899.0).abs() < 1e-15);
+        assert_eq!(m.coverage(1.0, 0.5), 1.0, "inside the sphere");
+        // d = 10: 0.0462 ≥ 0.01; d = 30: 0.00509; d = 100: 0.000458;
+        // d = 300: 0.0000509 < 0.0001, culled.
+        assert_eq!(m.lod_level(&o, 1.0, 10.0), Some(0));
+        assert_eq!(m.lod_level(&o, 1.0, 30.0), Some(1));
+        assert_eq!(m.lod_level(&o, 1.0, 100.0), Some(2));
+        assert_eq!(m.lod_level(&o, 1.0, 300.0), None);
+        // Thresholds are inclusive: exactly at level 1's coverage, level 1.
+        let d1 = (k / 0.001 + 1.0).sqrt();
+        let at = m.lod_level(&o, 1.0, d1 * (1.0 - 1e-12));
+        assert_eq!(at, Some(1));
+        // Without levels, always full detail.
+        let mut plain = lod_object();
+        plain.lods.clear();
+        assert_eq!(m.lod_level(&plain, 1.0, 1e9), Some(0));
+        assert_eq!(
+            m.object_view(&plain, 1.0, 30.0),
+            m.geometry(3, 1000, 1.0, 30.0)
+        );
+
+        // Sum mode: call 0.01 ms, triangle 2e-6 ms, pixel 5e-7 ms.
+        let px30 = std::f64::consts::PI * f * f / 899.0;
+        let v = m.object_view(&o, 1.0, 30.0);
+        assert!((v.cpu - 0.01).abs() < 1e-15, "{v:?}");
+        assert!(
+            (v.gpu - (200.0 * 2e-6 + 5e-7 * px30)).abs() < 1e-15,
+            "{v:?}"
+        );
+        assert_eq!(m.object_view(&o, 1.0, 300.0), Cost::default());
+        // Region from 30 m: levels 1 and 2 may be drawn; level 2 has the most
+        // calls (4), level 1 the most triangles (200).
+        let r = m.object_region(&o, 1.0, 30.0);
+        assert!((r.cpu - 0.04).abs() < 1e-15, "{r:?}");
+        assert!(
+            (r.gpu - (200.0 * 2e-6 + 5e-7 * px30)).abs() < 1e-15,
+            "{r:?}"
+        );
+        let px10 = std::f64::consts::PI * f * f / 99.0;
+        let r = m.object_region(&o, 1.0, 10.0);
+        assert!((r.cpu - 0.04).abs() < 1e-15, "{r:?}");
+        assert!(
+            (r.gpu - (1000.0 * 2e-6 + 5e-7 * px10)).abs() < 1e-15,
+            "{r:?}"
+        );
+        assert_eq!(m.object_region(&o, 1.0, 300.0), Cost::default());
+        // Primitives: triangles only.
+        let p = CostModel::new(&job(Combine::Primitives));
+        let r = p.object_region(&o, 1.0, 30.0);
+        assert_eq!(r.cpu, 0.0);
+        assert!((r.gpu - 200.0 * 2e-6).abs() < 1e-18, "{r:?}");
+        let v = p.object_view(&o, 1.0, 100.0);
+        assert!((v.gpu - 50.0 * 2e-6).abs() < 1e-18, "{v:?}");
+    }
+
+    #[test]
+    fn region_cost_bounds_every_farther_view() {
+        use crate::rng::Rng;
+        use crate::scene::LodLevel;
+        let mut rng = Rng::new(11);
+        for combine in [Combine::Sum, Combine::Max, Combine::Primitives] {
+            let m = CostModel::new(&job(combine));
+            for _ in 0..2000 {
+                let n = (rng.next_u64() % 6) as usize;
+                let mut thresholds: Vec<f64> = (0..n).map(|_| rng.f64().powi(4)).collect();
+                thresholds.sort_by(|a, b| b.total_cmp(a));
+                thresholds.dedup();
+                let triangles = rng.next_u64() % 100_000;
+                let draw_calls = 1 + (rng.next_u64() % 8) as u32;
+                let mut lods: Vec<LodLevel> = thresholds
+                    .iter()
+                    .map(|&min_coverage| LodLevel {
+                        min_coverage,
+                        triangles: rng.next_u64() % 100_000,
+                        draw_calls: 1 + (rng.next_u64() % 8) as u32,
+                    })
+                    .collect();
+                if let Some(first) = lods.first_mut() {
+                    first.triangles = triangles;
+                    first.draw_calls = draw_calls;
+                }
+                let o = Object {
+                    name: String::new(),
+                    min: glam::DVec3::ZERO,
+                    max: glam::DVec3::ONE,
+                    triangles,
+                    draw_calls,
+                    lods,
+                };
+                let radius = rng.range(0.1, 20.0);
+                let closest = rng.range(0.0, 500.0);
+                let bound = m.object_region(&o, radius, closest);
+                for _ in 0..20 {
+                    let d = closest + rng.f64().powi(2) * 2000.0;
+                    let v = m.object_view(&o, radius, d);
+                    assert!(
+                        v.cpu <= bound.cpu && v.gpu <= bound.gpu,
+                        "{combine:?} {o:?} r {radius} closest {closest} d {d}: {v:?} > {bound:?}"
+                    );
+                }
+            }
+        }
     }
 
     #[test]

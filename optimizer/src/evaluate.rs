@@ -345,12 +345,7 @@ fn view_time(
                         continue;
                     }
                     let ob = &scene.objects[o as usize];
-                    cost += model.geometry(
-                        ob.draw_calls,
-                        ob.triangles,
-                        s.radius,
-                        eye.distance(s.center),
-                    );
+                    cost += model.object_view(ob, s.radius, eye.distance(s.center));
                 }
             }
         }

@@ -1,6 +1,8 @@
 //! Scene geometry for rendering: triangles, normals, texture coordinates and
 //! base-colour materials of a glTF scene, read with the same safety rules and
 //! the same object ids as [`crate::gltf_load`] (which reads bounds only).
+//! Only full detail is read: `MSFT_lod` level nodes are not objects (the
+//! shared scene walk skips them) and their meshes are not loaded.
 //!
 //! Every mesh primitive with triangles is read once, however often it is
 //! instanced; an [`Instance`] places it in the world for one object. Object
@@ -518,6 +520,7 @@ mod tests {
         let glb = generate(&CityParams {
             seed: 2,
             scale: 0.05,
+            lod: false,
         })
         .unwrap();
         let scene = load_scene_bytes(&glb, "city").unwrap();
@@ -626,6 +629,7 @@ mod tests {
         let glb = generate(&CityParams {
             seed: 1,
             scale: 0.01,
+            lod: false,
         })
         .unwrap();
         let mut rng = crate::rng::Rng::new(7);

@@ -14,8 +14,13 @@
 //!   colour texture, an alpha mode (opaque, mask with cutoff, blend), double-sidedness
 //!   and optionally `KHR_materials_unlit` (for baked impostors);
 //! - PNG images live in buffer views, textures pair an image with a sampler;
-//! - nodes carry a name, an optional mesh, a TRS or matrix transform, children and
-//!   optional `extras`; the node graph is kept a forest by construction.
+//! - nodes carry a name, an optional mesh, a TRS or matrix transform, children,
+//!   optional `extras` and `extensions`; the node graph is kept a forest by
+//!   construction. Every extension used (`KHR_materials_unlit`, node
+//!   extensions such as `MSFT_lod`) is listed in `extensionsUsed`, sorted;
+//! - levels of detail (`MSFT_lod`): the coarser levels are nodes added before the
+//!   node that names them in `MSFT_lod.ids`; they are neither scene roots nor
+//!   children (the default scene roots leave them out).
 //!
 //! Nothing is deduplicated; every call writes what it is given.
 
@@ -42,6 +47,7 @@ pub const MAX_U16_INDEX: u32 = 65534;
 const MAX_BIN_BYTES: usize = 3 << 30;
 
 const UNLIT_EXTENSION: &str = "KHR_materials_unlit";
+const LOD_EXTENSION: &str = "MSFT_lod";
 
 /// How a material's alpha channel is interpreted.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
@@ -220,6 +226,10 @@ pub struct Node {
     pub children: Vec<u32>,
     /// Application-specific data written as the node's `extras`.
     pub extras: Option<Value>,
+    /// The node's `extensions` (omitted when empty); every key is listed in
+    /// `extensionsUsed`. `MSFT_lod` must be `{"ids": [...]}` naming distinct
+    /// nodes added earlier.
+    pub extensions: Map<String, Value>,
 }
 
 impl Node {
@@ -264,6 +274,12 @@ impl Node {
         self.extras = Some(extras);
         self
     }
+
+    /// The node with extension `name` set to `value`.
+    pub fn with_extension(mut self, name: impl Into<String>, value: Value) -> Self {
+        self.extensions.insert(name.into(), value);
+        self
+    }
 }
 
 /// Accessor indices of one written geometry.
@@ -291,7 +307,10 @@ pub struct GlbBuilder {
     nodes: Vec<Value>,
     parent: Vec<Option<u32>>,
     roots: Option<Vec<u32>>,
-    uses_unlit: bool,
+    /// Nodes named in some node's `MSFT_lod.ids`.
+    lod_level: Vec<bool>,
+    /// Extensions used so far.
+    extensions_used: std::collections::BTreeSet<String>,
 }
 
 fn bad(what: &str, message: impl Into<String>) -> Error {
@@ -602,7 +621,7 @@ impl GlbBuilder {
         }
         if material.unlit {
             m.insert("extensions".into(), json!({ UNLIT_EXTENSION: {} }));
-            self.uses_unlit = true;
+            self.extensions_used.insert(UNLIT_EXTENSION.into());
         }
         self.materials.push(Value::Object(m));
         to_u32(self.materials.len() - 1, "materials")
@@ -727,6 +746,15 @@ impl GlbBuilder {
                 n.insert("matrix".into(), jf_array(&m));
             }
         }
+        let mut levels = Vec::new();
+        for (name, value) in &node.extensions {
+            if name.is_empty() {
+                return Err(bad(&what, "an extension name is empty"));
+            }
+            if name == LOD_EXTENSION {
+                levels = self.lod_ids(value, index, &what)?;
+            }
+        }
         if !node.children.is_empty() {
             for (k, &c) in node.children.iter().enumerate() {
                 if c >= index {
@@ -744,12 +772,48 @@ impl GlbBuilder {
             }
             n.insert("children".into(), json!(node.children));
         }
+        self.extensions_used.extend(node.extensions.keys().cloned());
+        if !node.extensions.is_empty() {
+            n.insert("extensions".into(), Value::Object(node.extensions));
+        }
         if let Some(extras) = node.extras {
             n.insert("extras".into(), extras);
         }
+        for l in levels {
+            self.lod_level[l as usize] = true;
+        }
         self.nodes.push(Value::Object(n));
         self.parent.push(None);
+        self.lod_level.push(false);
         Ok(index)
+    }
+
+    /// Checks an `MSFT_lod` value of node `index`: `{"ids": [...]}` naming
+    /// distinct nodes added earlier; returns them.
+    fn lod_ids(&self, value: &Value, index: u32, what: &str) -> Result<Vec<u32>> {
+        let ids = value
+            .get("ids")
+            .and_then(Value::as_array)
+            .filter(|ids| !ids.is_empty())
+            .ok_or_else(|| bad(what, "MSFT_lod needs a non-empty `ids` array"))?;
+        let mut out: Vec<u32> = Vec::with_capacity(ids.len());
+        for id in ids {
+            let id = id
+                .as_u64()
+                .and_then(|i| u32::try_from(i).ok())
+                .filter(|&i| i < index)
+                .ok_or_else(|| {
+                    bad(
+                        what,
+                        format!("MSFT_lod id {id} is not a node added before this one"),
+                    )
+                })?;
+            if out.contains(&id) {
+                return Err(bad(what, format!("MSFT_lod names node {id} twice")));
+            }
+            out.push(id);
+        }
+        Ok(out)
     }
 
     /// Makes `child` (which must have no parent and not be a scene root or an ancestor
@@ -795,7 +859,8 @@ impl GlbBuilder {
     }
 
     /// Sets the root nodes of the (single) scene: existing, distinct nodes without a
-    /// parent. Without this call the roots are all parentless nodes in index order. A
+    /// parent. Without this call the roots are all parentless nodes in index order,
+    /// except levels of detail (nodes named in some `MSFT_lod.ids`). A
     /// document without any root node is written without a scene.
     pub fn set_scene_roots(&mut self, roots: &[u32]) -> Result<()> {
         for (k, &r) in roots.iter().enumerate() {
@@ -835,13 +900,13 @@ impl GlbBuilder {
             "asset".into(),
             json!({ "version": "2.0", "generator": "impostor" }),
         );
-        if self.uses_unlit {
-            root.insert("extensionsUsed".into(), json!([UNLIT_EXTENSION]));
+        if !self.extensions_used.is_empty() {
+            root.insert("extensionsUsed".into(), json!(self.extensions_used));
         }
         let roots: Vec<u32> = match &self.roots {
             Some(r) => r.clone(),
             None => (0..self.nodes.len() as u32)
-                .filter(|&i| self.parent[i as usize].is_none())
+                .filter(|&i| self.parent[i as usize].is_none() && !self.lod_level[i as usize])
                 .collect(),
         };
         // A scene without nodes is legal glTF but rejected by some readers, so an
@@ -1158,6 +1223,69 @@ mod tests {
             .map(|n| n.index())
             .collect();
         assert_eq!(kids, vec![child as usize, other as usize]);
+    }
+
+    #[test]
+    fn lod_levels_are_listed_and_are_not_roots() {
+        let (p, n, _, i) = triangle();
+        let mut b = GlbBuilder::new();
+        let mut m = Material::new("unlit", [1.0; 4]);
+        m.unlit = true;
+        let mat = b.add_material(&m).unwrap();
+        let g = Geometry {
+            positions: &p,
+            normals: Some(&n),
+            texcoords: None,
+            indices: &i,
+        };
+        let mesh = b.add_mesh_from("quad", &[(g, Some(mat))]).unwrap();
+        let coarse = b.add_mesh_from("tri", &[(g, None)]).unwrap();
+        let l1 = b.add_node(Node::new("l1").with_mesh(coarse)).unwrap();
+        let l2 = b.add_node(Node::new("l2").with_mesh(coarse)).unwrap();
+        let base = b
+            .add_node(
+                Node::new("base")
+                    .with_mesh(mesh)
+                    .with_extension("MSFT_lod", json!({ "ids": [l1, l2] }))
+                    .with_extras(json!({ "MSFT_screencoverage": [0.5, 0.1, 0.0] })),
+            )
+            .unwrap();
+        let plain = b.add_node(Node::new("plain").with_mesh(mesh)).unwrap();
+        // Bad MSFT_lod values: later or unknown nodes, repeats, no ids.
+        for ids in [json!([l1, 99]), json!([l1, l1]), json!([]), json!("x")] {
+            let node = Node::new("x").with_extension("MSFT_lod", json!({ "ids": ids }));
+            let e = b.add_node(node).unwrap_err().to_string();
+            assert!(e.contains("node 'x'") && e.contains("MSFT_lod"), "{e}");
+        }
+        let e = b
+            .add_node(Node::new("y").with_extension("", json!({})))
+            .unwrap_err();
+        assert!(e.to_string().contains("empty"), "{e}");
+        let bytes = b.finish();
+
+        let g = gltf::Gltf::from_slice(&bytes).unwrap();
+        assert_eq!(
+            g.document.extensions_used().collect::<Vec<_>>(),
+            vec![UNLIT_EXTENSION, LOD_EXTENSION]
+        );
+        // Default roots: parentless nodes except the levels.
+        let scene = g.document.default_scene().unwrap();
+        let roots: Vec<u32> = scene.nodes().map(|n| n.index() as u32).collect();
+        assert_eq!(roots, vec![base, plain]);
+        let node = g.document.nodes().nth(base as usize).unwrap();
+        assert_eq!(
+            node.extensions().unwrap()["MSFT_lod"],
+            json!({ "ids": [l1, l2] })
+        );
+        // The scene loader reads the chain back.
+        let loaded = crate::gltf_load::load_scene_bytes(&bytes, "lod.glb").unwrap();
+        assert_eq!(loaded.objects.len(), 2);
+        let levels: Vec<(f64, u64)> = loaded.objects[0]
+            .lods
+            .iter()
+            .map(|l| (l.min_coverage, l.triangles))
+            .collect();
+        assert_eq!(levels, [(0.5, 1), (0.1, 1), (0.0, 1)]);
     }
 
     #[test]

@@ -7,6 +7,42 @@
 //! vertex positions (for bounds) and the indices (for triangle counts and a
 //! range check). Images, materials and animations are never touched.
 //!
+//! # Levels of detail (`MSFT_lod`)
+//!
+//! A node with `"extensions": {"MSFT_lod": {"ids": [n1, n2, …]}}` names
+//! coarser versions of itself, in decreasing detail; its
+//! `"extras": {"MSFT_screencoverage": [c0, c1, …]}` says when each is
+//! drawn: level `i` (level 0 is the node itself) while the screen coverage
+//! is in `[c_i, c_{i−1})` (with `c_{−1} = 1`), nothing below the last value.
+//! Screen coverage is read in this tool's convention: the projected area of
+//! the object's bounding sphere over the screen area
+//! ([`crate::cost::CostModel::coverage`]). The rules:
+//!
+//! * Nodes named in some node's `MSFT_lod.ids` are levels of detail, not
+//!   objects: wherever they appear in the scene, they and their subtrees are
+//!   skipped, so object ids (DESIGN §5) count real objects only. Both this
+//!   loader and [`crate::geometry`] walk the scene with the same function, so
+//!   their ids agree.
+//! * A level node takes the object's place: its world transform is the
+//!   object node's parent world transform × the level node's local
+//!   transform. Its mesh gives the level's triangles and draw calls (its
+//!   children are ignored), and the object's bounds are the union of all
+//!   levels' world bounds, so every level lies within them.
+//! * `MSFT_screencoverage` with `ids.len() + 1` values gives every level's
+//!   [`LodLevel::min_coverage`]; with `ids.len()` values the last level has 0
+//!   (it is never culled). Without `MSFT_screencoverage` there is no switching
+//!   rule, so the levels are ignored: the object is always drawn in full
+//!   detail (its level nodes are still not objects). A node with `MSFT_lod`
+//!   but no mesh is not an object; its level nodes are skipped too.
+//! * Errors naming the node: `ids` missing, empty, not node indices, naming
+//!   the node itself or a node twice, more than 31 entries; coverage values
+//!   of another count, not numbers in `[0, 1]` or not strictly decreasing; a
+//!   level node without a mesh.
+//! * `MSFT_lod` on materials is ignored (placement never reads materials).
+//!
+//! Levels are always loaded; a job with `lod.enabled = false` clears them
+//! with [`crate::lod::strip_lods`].
+//!
 //! The input is untrusted (HTTP uploads), so the loader
 //!
 //! * resolves buffers itself: the GLB `BIN` chunk and base64 `data:` URIs,
@@ -31,7 +67,7 @@ use gltf::mesh::Mode;
 use rayon::prelude::*;
 
 use crate::error::{Error, Result};
-use crate::scene::{Object, Scene, SceneSummary};
+use crate::scene::{LodLevel, Object, Scene, SceneSummary};
 
 /// Largest number of glTF nodes (and so of objects) a scene may have.
 pub const MAX_NODES: usize = 10_000_000;
@@ -195,11 +231,13 @@ struct MeshInfo {
     draw_calls: u32,
 }
 
-/// One node of the scene that draws a mesh.
+/// One node of the scene that draws a mesh: an object.
 pub(crate) struct Instance {
     pub(crate) node: usize,
     pub(crate) mesh: usize,
     pub(crate) world: DAffine3,
+    /// Its coarser levels of detail, when the file gives them.
+    pub(crate) lods: Option<LodChain>,
 }
 
 fn load_gltf_inner(bytes: &[u8], source: &str, base_dir: Option<&Path>) -> Result<Scene> {
@@ -217,7 +255,10 @@ fn load_gltf_inner(bytes: &[u8], source: &str, base_dir: Option<&Path>) -> Resul
     // the lowest mesh index so the message does not depend on scheduling.
     let used: Vec<usize> = instances
         .iter()
-        .map(|i| i.mesh)
+        .flat_map(|i| {
+            let levels = i.lods.as_ref().map_or(&[][..], |c| &c.levels[..]);
+            std::iter::once(i.mesh).chain(levels.iter().map(|l| l.mesh))
+        })
         .collect::<BTreeSet<_>>()
         .into_iter()
         .collect();
@@ -234,13 +275,34 @@ fn load_gltf_inner(bytes: &[u8], source: &str, base_dir: Option<&Path>) -> Resul
     let nodes: Vec<gltf::Node> = doc.nodes().collect();
     let mut objects = Vec::with_capacity(instances.len());
     let mut total: u64 = 0;
+    let info_of = |mesh: usize| {
+        mesh_infos[mesh].ok_or_else(|| Error::Internal(format!("mesh {mesh} was not read")))
+    };
     for inst in &instances {
-        let info = mesh_infos[inst.mesh]
-            .ok_or_else(|| Error::Internal(format!("mesh {} was not read", inst.mesh)))?;
+        let info = info_of(inst.mesh)?;
         total = total.checked_add(info.triangles).ok_or_else(|| {
             Error::bad(source, "the total triangle count does not fit in 64 bits")
         })?;
-        let (min, max) = transform_box(&inst.world, info.min, info.max);
+        let (mut min, mut max) = transform_box(&inst.world, info.min, info.max);
+        let mut lods = Vec::new();
+        if let Some(chain) = &inst.lods {
+            lods.push(LodLevel {
+                min_coverage: chain.min_coverage[0],
+                triangles: info.triangles,
+                draw_calls: info.draw_calls,
+            });
+            for (level, &min_coverage) in chain.levels.iter().zip(&chain.min_coverage[1..]) {
+                let li = info_of(level.mesh)?;
+                let (lo, hi) = transform_box(&level.world, li.min, li.max);
+                min = min.min(lo);
+                max = max.max(hi);
+                lods.push(LodLevel {
+                    min_coverage,
+                    triangles: li.triangles,
+                    draw_calls: li.draw_calls,
+                });
+            }
+        }
         let node = &nodes[inst.node];
         let name = match (node.name(), meshes[inst.mesh].name()) {
             (Some(n), _) if !n.is_empty() => n.to_string(),
@@ -253,7 +315,7 @@ fn load_gltf_inner(bytes: &[u8], source: &str, base_dir: Option<&Path>) -> Resul
             max,
             triangles: info.triangles,
             draw_calls: info.draw_calls,
-            lods: Vec::new(),
+            lods,
         });
     }
     let scene = Scene { objects };
@@ -360,14 +422,15 @@ pub(crate) fn precheck_root_with(
                 format!("the file requires {ext}, which is not supported; {hint}"),
             ));
         }
-        if !APPEARANCE_EXTENSIONS.contains(&ext.as_str()) {
+        if !APPEARANCE_EXTENSIONS.contains(&ext.as_str()) && ext != "MSFT_lod" {
             return Err(Error::bad(
                 format!("{source}: extensionsRequired"),
                 format!("the file requires the unknown extension {ext}"),
             ));
         }
     }
-    // Placement ignores appearance, so these need not be understood, and
+    // Placement ignores appearance, so these need not be understood (and
+    // `MSFT_lod` is read by `walk_scene`), and
     // materials, textures and images are dropped before validation: a
     // KTX2-only texture (no `source`) or a broken image then cannot reject
     // a scene whose geometry is fine.
@@ -617,9 +680,170 @@ fn shorten(s: &str) -> String {
     }
 }
 
+/// The coarser levels of detail of an object (`MSFT_lod`).
+pub(crate) struct LodChain {
+    /// Levels 1, 2, … (level 0 is the object's own node).
+    pub(crate) levels: Vec<LodNode>,
+    /// `min_coverage` of levels 0, 1, …: one more value than `levels`,
+    /// finite, in `[0, 1]`, strictly decreasing.
+    pub(crate) min_coverage: Vec<f64>,
+}
+
+/// One coarser level: a node named in `MSFT_lod.ids`, placed where the
+/// object's node is.
+pub(crate) struct LodNode {
+    pub(crate) mesh: usize,
+    /// The object's parent world transform × this node's local transform.
+    pub(crate) world: DAffine3,
+}
+
+/// Most coarser levels one node may name (so an object has at most 32).
+const MAX_LOD_IDS: usize = 31;
+
+/// The `MSFT_lod.ids` of every node that has them (checked: integers naming
+/// other, existing nodes, each once, at most [`MAX_LOD_IDS`]).
+fn lod_ids(doc: &gltf::Document, source: &str) -> Result<Vec<Option<Vec<usize>>>> {
+    let json_nodes = &doc.as_json().nodes;
+    let count = json_nodes.len();
+    let mut out = Vec::with_capacity(count);
+    for (n, node) in json_nodes.iter().enumerate() {
+        let Some(ext) = node
+            .extensions
+            .as_ref()
+            .and_then(|e| e.others.get("MSFT_lod"))
+        else {
+            out.push(None);
+            continue;
+        };
+        let what = format!("{source}: node {n} extensions.MSFT_lod.ids");
+        let Some(list) = ext.get("ids").and_then(serde_json::Value::as_array) else {
+            return Err(Error::bad(what, "is missing or not an array"));
+        };
+        if list.is_empty() {
+            return Err(Error::bad(what, "is empty"));
+        }
+        if list.len() > MAX_LOD_IDS {
+            return Err(Error::bad(
+                what,
+                format!("names {} levels, at most {MAX_LOD_IDS}", list.len()),
+            ));
+        }
+        let mut ids: Vec<usize> = Vec::with_capacity(list.len());
+        for (k, v) in list.iter().enumerate() {
+            let id = v
+                .as_u64()
+                .and_then(|id| usize::try_from(id).ok())
+                .filter(|&id| id < count)
+                .ok_or_else(|| {
+                    Error::bad(
+                        &what,
+                        format!("entry {k} ({v}) is not a node index (the file has {count} nodes)"),
+                    )
+                })?;
+            if id == n {
+                return Err(Error::bad(
+                    &what,
+                    format!("entry {k} names the node itself"),
+                ));
+            }
+            if ids.contains(&id) {
+                return Err(Error::bad(&what, format!("entry {k} repeats node {id}")));
+            }
+            ids.push(id);
+        }
+        out.push(Some(ids));
+    }
+    Ok(out)
+}
+
+/// The `extras.MSFT_screencoverage` of node `n` as the `min_coverage` of
+/// levels 0 … `levels` (`levels + 1` values, or `levels` values and a final
+/// 0), or `None` when the node has no such entry.
+fn screen_coverage(
+    extras: &gltf::json::Extras,
+    n: usize,
+    levels: usize,
+    source: &str,
+) -> Result<Option<Vec<f64>>> {
+    /// The one entry of a node's extras that matters here.
+    #[derive(serde::Deserialize)]
+    struct NodeExtras {
+        #[serde(rename = "MSFT_screencoverage", default)]
+        coverage: Option<serde_json::Value>,
+    }
+    let what = format!("{source}: node {n} extras.MSFT_screencoverage");
+    let Some(raw) = extras else {
+        return Ok(None);
+    };
+    // Only an object can carry the entry (a struct would also accept an array).
+    if !raw.get().trim_start().starts_with('{') {
+        return Ok(None);
+    }
+    let parsed: NodeExtras = serde_json::from_str(raw.get())
+        .map_err(|e| Error::bad(&what, format!("the node's extras cannot be read: {e}")))?;
+    let Some(value) = parsed.coverage else {
+        return Ok(None);
+    };
+    let Some(list) = value.as_array() else {
+        return Err(Error::bad(what, "is not an array of numbers"));
+    };
+    let mut values = Vec::with_capacity(levels + 1);
+    for (k, v) in list.iter().enumerate() {
+        match v.as_f64() {
+            Some(c) if c.is_finite() && (0.0..=1.0).contains(&c) => values.push(c),
+            _ => {
+                return Err(Error::bad(
+                    what,
+                    format!("value {k} ({v}) is not a number in [0, 1]"),
+                ));
+            }
+        }
+    }
+    if values.len() == levels {
+        if values.last().is_some_and(|&c| c <= 0.0) {
+            return Err(Error::bad(
+                what,
+                format!(
+                    "has {levels} values ending in 0 for {levels} MSFT_lod levels: the last \
+                     level would never be drawn"
+                ),
+            ));
+        }
+        values.push(0.0);
+    } else if values.len() != levels + 1 {
+        return Err(Error::bad(
+            what,
+            format!(
+                "has {} values for {levels} MSFT_lod levels; expected {} (one per level, the \
+                 node's own first) or {levels} (the last level never culled)",
+                values.len(),
+                levels + 1
+            ),
+        ));
+    }
+    if let Some(k) = (1..values.len()).find(|&k| values[k] >= values[k - 1]) {
+        return Err(Error::bad(
+            what,
+            format!(
+                "values must be strictly decreasing, but value {k} ({}) is not below value {} ({})",
+                values[k],
+                k - 1,
+                values[k - 1]
+            ),
+        ));
+    }
+    Ok(Some(values))
+}
+
 /// Walks the default scene depth-first in pre-order, children in array
 /// order, without recursion; returns the nodes that carry a mesh with their
-/// world transforms.
+/// world transforms and their levels of detail.
+///
+/// Nodes named in some node's `MSFT_lod.ids` are levels of detail, not
+/// objects: wherever they appear in the scene they and their subtrees are
+/// skipped. An object whose node has `MSFT_lod` and
+/// `extras.MSFT_screencoverage` gets its levels, each placed by the object's
+/// parent world transform × the level node's local transform.
 pub(crate) fn walk_scene(doc: &gltf::Document, source: &str) -> Result<Vec<Instance>> {
     const UNVISITED: usize = usize::MAX;
     const ROOT: usize = usize::MAX - 1;
@@ -629,6 +853,11 @@ pub(crate) fn walk_scene(doc: &gltf::Document, source: &str) -> Result<Vec<Insta
     };
     let nodes: Vec<gltf::Node> = doc.nodes().collect();
     let json_nodes = &doc.as_json().nodes;
+    let lod_ids = lod_ids(doc, source)?;
+    let mut is_level = vec![false; nodes.len()];
+    for &id in lod_ids.iter().flatten().flatten() {
+        is_level[id] = true;
+    }
     // parent[n]: the node n was reached from (ROOT for scene roots).
     let mut parent = vec![UNVISITED; nodes.len()];
     let mut instances = Vec::new();
@@ -673,6 +902,10 @@ pub(crate) fn walk_scene(doc: &gltf::Document, source: &str) -> Result<Vec<Insta
             ));
         }
         parent[n] = from;
+        if is_level[n] {
+            // A level of detail of some object, not an object itself.
+            continue;
+        }
         let node = &nodes[n];
         let local = local_transform(node, source)?;
         let world = parent_world * local;
@@ -683,10 +916,25 @@ pub(crate) fn walk_scene(doc: &gltf::Document, source: &str) -> Result<Vec<Insta
             ));
         }
         if let Some(mesh) = node.mesh() {
+            let lods = match &lod_ids[n] {
+                None => None,
+                Some(ids) => match screen_coverage(&json_nodes[n].extras, n, ids.len(), source)? {
+                    None => None,
+                    Some(min_coverage) => Some(LodChain {
+                        levels: ids
+                            .iter()
+                            .enumerate()
+                            .map(|(k, &id)| lod_node(&nodes[id], n, k + 1, parent_world, source))
+                            .collect::<Result<_>>()?,
+                        min_coverage,
+                    }),
+                },
+            };
             instances.push(Instance {
                 node: n,
                 mesh: mesh.index(),
                 world,
+                lods,
             });
         }
         if let Some(children) = &json_nodes[n].children {
@@ -694,6 +942,35 @@ pub(crate) fn walk_scene(doc: &gltf::Document, source: &str) -> Result<Vec<Insta
         }
     }
     Ok(instances)
+}
+
+/// Level `level` of the object of node `base`: the node `node`, which must
+/// carry a mesh, placed by the base's parent world transform.
+fn lod_node(
+    node: &gltf::Node,
+    base: usize,
+    level: usize,
+    parent_world: DAffine3,
+    source: &str,
+) -> Result<LodNode> {
+    let id = node.index();
+    let Some(mesh) = node.mesh() else {
+        return Err(Error::bad(
+            format!("{source}: node {id}"),
+            format!("is level {level} of node {base} (MSFT_lod) but has no mesh"),
+        ));
+    };
+    let world = parent_world * local_transform(node, source)?;
+    if !world.is_finite() {
+        return Err(Error::bad(
+            format!("{source}: node {id}"),
+            format!("the world transform of level {level} of node {base} is not finite"),
+        ));
+    }
+    Ok(LodNode {
+        mesh: mesh.index(),
+        world,
+    })
 }
 
 /// A node's local transform in f64; rejects non-finite, non-affine and
@@ -1843,6 +2120,228 @@ mod tests {
         );
         d.json["extensionsRequired"] = json!(["VENDOR_unknown"]);
         assert!(load_err(&d.glb()).contains("VENDOR_unknown"));
+    }
+
+    /// A scene with one object of three levels: parent node 0 (translation
+    /// x = 100) → base node 1 (cube at x + 1, `MSFT_lod` ids [2, 3]); node 2
+    /// a one-triangle mesh at y + 5, node 3 the cube scaled by 2; node 4 an
+    /// ordinary cube at z = 50. Nodes 2 and 3 are in no scene.
+    fn lod_doc(coverage: Option<Value>) -> Doc {
+        let mut d = Doc::new();
+        let cube = d.cube();
+        let p = d.positions(&[[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]]);
+        let tri = d.mesh("tri", p, None, 4);
+        let mut base = json!({"name": "base", "mesh": cube, "translation": [1.0, 0.0, 0.0],
+                              "extensions": {"MSFT_lod": {"ids": [2, 3]}}});
+        if let Some(c) = coverage {
+            base["extras"] = json!({"other": [1, 2], "MSFT_screencoverage": c});
+        }
+        d.node(json!({"translation": [100.0, 0.0, 0.0], "children": [1]}));
+        d.node(base);
+        d.node(json!({"name": "lod1", "mesh": tri, "translation": [0.0, 5.0, 0.0]}));
+        d.node(json!({"name": "lod2", "mesh": cube, "scale": [2.0, 2.0, 2.0]}));
+        d.node(json!({"name": "plain", "mesh": cube, "translation": [0.0, 0.0, 50.0]}));
+        d.roots(&[0, 4]);
+        d.json["extensionsUsed"] = json!(["MSFT_lod"]);
+        d
+    }
+
+    #[test]
+    fn msft_lod_levels_costs_and_bounds() {
+        let d = lod_doc(Some(json!([0.5, 0.2, 0.01])));
+        for bytes in [d.glb(), d.gltf()] {
+            let scene = load(&bytes).unwrap();
+            assert_eq!(scene.objects.len(), 2, "level nodes are not objects");
+            let o = &scene.objects[0];
+            assert_eq!(o.name, "base");
+            assert_eq!((o.triangles, o.draw_calls), (12, 1));
+            let l = |min_coverage, triangles| LodLevel {
+                min_coverage,
+                triangles,
+                draw_calls: 1,
+            };
+            assert_eq!(o.lods, vec![l(0.5, 12), l(0.2, 1), l(0.01, 12)]);
+            // Level 0 [101, 102] × [0, 1]²; level 1 the triangle at
+            // (100, 5, 0) … (101, 6, 0); level 2 [100, 102]³ − … (scale 2 at
+            // the parent's x = 100): the union.
+            assert_vec(o.min, [100.0, 0.0, 0.0]);
+            assert_vec(o.max, [102.0, 6.0, 2.0]);
+            assert_eq!(scene.objects[1].name, "plain");
+            assert!(scene.objects[1].lods.is_empty());
+            assert_vec(scene.objects[1].min, [0.0, 0.0, 50.0]);
+        }
+        // The summary round trip keeps the levels.
+        let scene = load(&d.glb()).unwrap();
+        let json = serde_json::to_vec(&scene.summary()).unwrap();
+        let back = SceneSummary::from_json(&json, "s.json").unwrap();
+        assert_eq!(back.objects, scene.objects);
+
+        // `ids.len()` values: the last level is never culled.
+        let scene = load(&lod_doc(Some(json!([0.5, 0.2]))).glb()).unwrap();
+        let c: Vec<f64> = scene.objects[0]
+            .lods
+            .iter()
+            .map(|l| l.min_coverage)
+            .collect();
+        assert_eq!(c, [0.5, 0.2, 0.0]);
+        // No screen coverage: no switching rule, full detail only, but the
+        // level nodes are still not objects and do not widen the bounds.
+        let scene = load(&lod_doc(None).glb()).unwrap();
+        assert_eq!(scene.objects.len(), 2);
+        assert!(scene.objects[0].lods.is_empty());
+        assert_vec(scene.objects[0].min, [101.0, 0.0, 0.0]);
+        assert_vec(scene.objects[0].max, [102.0, 1.0, 1.0]);
+        // extensionsRequired may name MSFT_lod.
+        let mut d = lod_doc(Some(json!([0.5, 0.2])));
+        d.json["extensionsRequired"] = json!(["MSFT_lod"]);
+        assert_eq!(load(&d.glb()).unwrap().objects[0].lods.len(), 3);
+    }
+
+    #[test]
+    fn msft_lod_errors_name_the_node() {
+        let cases: Vec<(Option<Value>, Value, &str, &str)> = vec![
+            (
+                Some(json!([0.5])),
+                json!([2, 3]),
+                "node 1 extras",
+                "expected 3",
+            ),
+            (
+                Some(json!([0.5, 0.6, 0.1])),
+                json!([2, 3]),
+                "node 1 extras",
+                "strictly decreasing",
+            ),
+            (
+                Some(json!([0.5, 0.5])),
+                json!([2, 3]),
+                "node 1 extras",
+                "strictly decreasing",
+            ),
+            (
+                Some(json!([0.5, 0.0])),
+                json!([2, 3]),
+                "node 1 extras",
+                "never be drawn",
+            ),
+            (
+                Some(json!([1.5, 0.2, 0.1])),
+                json!([2, 3]),
+                "node 1 extras",
+                "[0, 1]",
+            ),
+            (
+                Some(json!([0.5, "x", 0.1])),
+                json!([2, 3]),
+                "node 1 extras",
+                "[0, 1]",
+            ),
+            (
+                Some(json!({"a": 1})),
+                json!([2, 3]),
+                "node 1 extras",
+                "not an array",
+            ),
+            (
+                Some(json!([0.5, 0.2])),
+                json!([2, 99]),
+                "node 1 extensions",
+                "not a node index",
+            ),
+            (
+                Some(json!([0.5, 0.2])),
+                json!([2, -1]),
+                "node 1 extensions",
+                "not a node index",
+            ),
+            (
+                Some(json!([0.5, 0.2])),
+                json!([2, 1]),
+                "node 1 extensions",
+                "itself",
+            ),
+            (
+                Some(json!([0.5, 0.2])),
+                json!([2, 2]),
+                "node 1 extensions",
+                "repeats",
+            ),
+            (Some(json!([0.5])), json!([]), "node 1 extensions", "empty"),
+            (
+                Some(json!([0.5, 0.2])),
+                json!("2"),
+                "node 1 extensions",
+                "not an array",
+            ),
+        ];
+        for (coverage, ids, at, says) in cases {
+            let mut d = lod_doc(coverage);
+            d.json["nodes"][1]["extensions"]["MSFT_lod"]["ids"] = ids.clone();
+            for message in [
+                load_err(&d.glb()),
+                crate::geometry::load_geometry_bytes(&d.glb(), "t.glb")
+                    .unwrap_err()
+                    .to_string(),
+            ] {
+                assert!(
+                    message.contains(at) && message.contains(says),
+                    "{ids} {message}"
+                );
+            }
+        }
+        // A level node without a mesh.
+        let mut d = lod_doc(Some(json!([0.5, 0.2])));
+        d.json["nodes"][3].as_object_mut().unwrap().remove("mesh");
+        let message = load_err(&d.glb());
+        assert!(
+            message.contains("node 3") && message.contains("level 2 of node 1"),
+            "{message}"
+        );
+    }
+
+    #[test]
+    fn level_nodes_are_skipped_wherever_they_appear_and_both_loaders_agree() {
+        // Roots: level node 2 (with a child cube, node 5) first, then the
+        // parent of the base, then a plain cube. Objects: base, plain.
+        let mut d = lod_doc(Some(json!([0.5, 0.2])));
+        let cube = 0;
+        let child = d.node(json!({"name": "under_level", "mesh": cube}));
+        d.json["nodes"][2]["children"] = json!([child]);
+        d.roots(&[2, 0, 4]);
+        let glb = d.glb();
+        let scene = load(&glb).unwrap();
+        let names: Vec<&str> = scene.objects.iter().map(|o| o.name.as_str()).collect();
+        assert_eq!(names, ["base", "plain"]);
+        let geom = crate::geometry::load_geometry_bytes(&glb, "t.glb").unwrap();
+        assert_eq!(geom.object_count(), 2);
+        // Level 0 geometry only: one cube primitive per object, placed at the
+        // object's own node.
+        let placed: Vec<(u32, glam::DVec3)> = geom
+            .instances
+            .iter()
+            .map(|i| (i.object, i.transform.translation))
+            .collect();
+        assert_eq!(
+            placed,
+            [
+                (0, glam::DVec3::new(101.0, 0.0, 0.0)),
+                (1, glam::DVec3::new(0.0, 0.0, 50.0))
+            ]
+        );
+        assert!(
+            geom.instances
+                .iter()
+                .all(|i| geom.meshes[i.mesh as usize].indices.len() == 36)
+        );
+        for (o, ob) in scene.objects.iter().enumerate() {
+            let tris: u64 = geom
+                .instances
+                .iter()
+                .filter(|i| i.object as usize == o)
+                .map(|i| geom.meshes[i.mesh as usize].indices.len() as u64 / 3)
+                .sum();
+            assert_eq!(tris, ob.triangles);
+        }
     }
 
     #[test]

@@ -80,9 +80,7 @@ impl SceneInput {
             )
         };
         if !job.lod.enabled {
-            for o in &mut scene.objects {
-                o.lods.clear();
-            }
+            crate::lod::strip_lods(&mut scene);
         }
         let mut lod = None;
         if job.lod.generate {
@@ -90,7 +88,15 @@ impl SceneInput {
                 .as_ref()
                 .ok_or_else(|| geometry_needed("lod.generate"))?;
             let start = Instant::now();
-            lod = Some(crate::lod::generate_for_job(&mut scene, g, job)?);
+            let model = crate::cost::CostModel::new(job);
+            lod = Some(crate::lod::generate(
+                &mut scene,
+                g,
+                &job.lod,
+                model.focal_px,
+                model.screen_px,
+                job.max_error_px,
+            )?);
             timed("lod", start);
         }
         let mut occ = None;

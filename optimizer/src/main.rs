@@ -143,6 +143,11 @@ enum Command {
         /// Write the JSON scene summary instead of the GLB.
         #[arg(long)]
         summary: bool,
+        /// Give street objects (trees, lamps, benches, cars, bins) two coarser
+        /// levels of detail (glTF MSFT_lod with MSFT_screencoverage); objects
+        /// and their full-detail geometry are unchanged.
+        #[arg(long)]
+        lod: bool,
         /// Output file (default: standard output for --summary; required for GLB).
         #[arg(short, long)]
         out: Option<PathBuf>,
@@ -525,9 +530,10 @@ fn run(cli: Cli) -> Result<ExitCode> {
             seed,
             scale,
             summary,
+            lod,
             out,
         } => {
-            let glb = citygen::generate(&citygen::CityParams { seed, scale })?;
+            let glb = citygen::generate(&citygen::CityParams { seed, scale, lod })?;
             if summary {
                 let scene = gltf_load::load_scene_bytes(&glb, "generated city")?;
                 write_output(out.as_deref(), &json(&scene.summary())?)?;

@@ -324,12 +324,15 @@ impl RegionCosts {
                 if visible.is_some_and(|v| !v.contains(id as u32)) {
                     return Cost::default();
                 }
-                ctx.model.geometry(
-                    o.draw_calls,
-                    o.triangles,
-                    s.radius,
-                    region.distance_to_point(s.center),
-                )
+                let d = region.distance_to_point(s.center);
+                if !o.lods.is_empty() {
+                    let slot = ctx
+                        .model
+                        .lod_level(o, s.radius, d)
+                        .unwrap_or(crate::scene::MAX_LODS);
+                    ctx.lod_levels[slot].fetch_add(1, AtomicOrdering::Relaxed);
+                }
+                ctx.model.object_region(o, s.radius, d)
             })
             .collect();
         let h = ctx.hierarchy;

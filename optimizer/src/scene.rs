@@ -231,3 +231,57 @@ impl SceneSummary {
         Ok(scene)
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn summary_round_trip_keeps_levels() {
+        let level = |min_coverage, triangles, draw_calls| LodLevel {
+            min_coverage,
+            triangles,
+            draw_calls,
+        };
+        let scene = Scene {
+            objects: vec![
+                Object {
+                    name: "tree".into(),
+                    min: DVec3::new(-1.0, 0.0, -1.0),
+                    max: DVec3::new(1.0, 8.5, 1.0),
+                    triangles: 1040,
+                    draw_calls: 2,
+                    lods: vec![
+                        level(0.08, 1040, 2),
+                        level(0.0031, 192, 2),
+                        level(0.0, 52, 2),
+                    ],
+                },
+                Object {
+                    name: String::new(),
+                    min: DVec3::ZERO,
+                    max: DVec3::ONE,
+                    triangles: 12,
+                    draw_calls: 1,
+                    lods: Vec::new(),
+                },
+            ],
+        };
+        let json = crate::to_json_bytes(&scene.summary()).unwrap();
+        let text = String::from_utf8(json.clone()).unwrap();
+        assert_eq!(text.matches("\"lods\"").count(), 1, "omitted when empty");
+        let back = SceneSummary::from_json(&json, "s.json").unwrap();
+        assert_eq!(back.objects, scene.objects);
+        // Invalid levels are rejected with the object named.
+        let mut bad = scene.clone();
+        bad.objects[0].lods[2].min_coverage = 0.5;
+        let json = crate::to_json_bytes(&bad.summary()).unwrap();
+        let e = SceneSummary::from_json(&json, "s.json")
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("object 0 (tree): lods") && e.contains("level 2"),
+            "{e}"
+        );
+    }
+}

@@ -39,6 +39,7 @@ async fn main() -> std::io::Result<()> {
     let glb = optimizer::citygen::generate(&optimizer::citygen::CityParams {
         seed: 1,
         scale: 1.0,
+        lod: false,
     })
     .map_err(std::io::Error::other)?;
     let scene =

@@ -16,7 +16,12 @@ fn job_json() -> Vec<u8> {
 }
 
 fn city(scale: f64) -> Vec<u8> {
-    optimizer::citygen::generate(&optimizer::citygen::CityParams { seed: 1, scale }).unwrap()
+    optimizer::citygen::generate(&optimizer::citygen::CityParams {
+        seed: 1,
+        scale,
+        lod: false,
+    })
+    .unwrap()
 }
 
 fn temp_dir(name: &str) -> PathBuf {

@@ -58,6 +58,7 @@ fn kill_9_and_restart_finishes_every_job() {
     let glb = optimizer::citygen::generate(&optimizer::citygen::CityParams {
         seed: 1,
         scale: 0.1,
+        lod: false,
     })
     .unwrap();
     let scene = optimizer::gltf_load::load_scene_bytes(&glb, "c").unwrap();
