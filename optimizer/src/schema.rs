@@ -7,6 +7,7 @@ use crate::evaluate::Evaluation;
 use crate::job::Job;
 use crate::placement::{Placement, Stats};
 use crate::scene::SceneSummary;
+use crate::visibility::pvs::PvsFile;
 
 /// `(file name, schema text)` of every wire type.
 pub fn all() -> Vec<(&'static str, String)> {
@@ -21,5 +22,6 @@ pub fn all() -> Vec<(&'static str, String)> {
         ("placement.schema.json", pretty(schema_for!(Placement))),
         ("evaluation.schema.json", pretty(schema_for!(Evaluation))),
         ("stats.schema.json", pretty(schema_for!(Stats))),
+        ("pvs.schema.json", pretty(schema_for!(PvsFile))),
     ]
 }

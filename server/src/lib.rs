@@ -32,7 +32,7 @@ use optimizer::job::Job;
 
 pub mod client;
 pub mod openapi;
-use optimizer::pipeline::{Control, PlaceOptions, place_controlled};
+use optimizer::pipeline::{Control, PlaceOptions, place_input};
 
 /// Version of the optimizer library this service is built against.
 pub const OPTIMIZER_VERSION: &str = optimizer::VERSION;
@@ -306,6 +306,24 @@ impl AppState {
         let job_bytes = std::fs::read(dir.join("job.json")).map_err(io(dir.join("job.json")))?;
         let job = Job::from_json(&job_bytes, "job")?;
         let scene = optimizer::gltf_load::load_scene_bytes(&scene_bytes, "scene")?;
+        // Geometry when the job needs it, or for the evaluation's check of
+        // the visible sets when the scene has any.
+        let geometry = if optimizer::input::needs_geometry(&job)
+            || (job.visibility.mode != optimizer::job::VisibilityMode::None
+                && scene_bytes.starts_with(b"glTF"))
+        {
+            Some(optimizer::geometry::load_geometry_bytes(&scene_bytes, "scene")?)
+        } else {
+            None
+        };
+        let pvs_path = dir.join("pvs.json");
+        let pvs = if pvs_path.exists() {
+            let bytes = std::fs::read(&pvs_path).map_err(io(pvs_path.clone()))?;
+            Some(optimizer::visibility::pvs::PvsFile::from_json(&bytes, "pvs")?)
+        } else {
+            None
+        };
+        let input = optimizer::input::SceneInput::new(scene, geometry, pvs, &job)?;
         let progress = |stage: &str, f: f64| {
             if let Ok(mut live) = self.0.live.lock()
                 && let Some(l) = live.get_mut(&id)
@@ -321,13 +339,13 @@ impl AppState {
             cancel: Some(cancel),
             on_progress: Some(&progress),
         };
-        let out = place_controlled(&scene, &job, &PlaceOptions::default(), &ctl)?;
+        let out = place_input(&input, &job, &PlaceOptions::default(), &ctl)?;
         let placement = optimizer::to_json_bytes(&out.placement)?;
         write_atomic(&dir.join("placement.json"), &placement)
             .map_err(io(dir.join("placement.json")))?;
         progress("evaluate", 0.98);
-        let eval = optimizer::evaluate::evaluate(
-            &scene,
+        let eval = optimizer::evaluate::evaluate_input(
+            &input,
             &job,
             &out.placement,
             &optimizer::evaluate::EvalOptions {
@@ -380,7 +398,13 @@ impl AppState {
     }
 
     /// Validates and stores a job, then queues it. Returns its id.
-    fn submit(&self, scene: &[u8], job: &[u8], bake: bool) -> Result<i64, ApiError> {
+    fn submit(
+        &self,
+        scene: &[u8],
+        job: &[u8],
+        pvs: Option<&[u8]>,
+        bake: bool,
+    ) -> Result<i64, ApiError> {
         let unprocessable = |e: optimizer::Error| {
             if e.is_bad_input() {
                 err(StatusCode::UNPROCESSABLE_ENTITY, e.to_string())
@@ -388,8 +412,36 @@ impl AppState {
                 internal(e)
             }
         };
-        Job::from_json(job, "job").map_err(unprocessable)?;
-        optimizer::gltf_load::load_scene_bytes(scene, "scene").map_err(unprocessable)?;
+        let parsed = Job::from_json(job, "job").map_err(unprocessable)?;
+        let objects = optimizer::gltf_load::load_scene_bytes(scene, "scene")
+            .map_err(unprocessable)?
+            .objects
+            .len();
+        if optimizer::input::needs_geometry(&parsed) && !scene.starts_with(b"glTF") {
+            // A summary (or glTF JSON): check it has geometry at all.
+            optimizer::geometry::load_geometry_bytes(scene, "scene").map_err(|e| {
+                err(
+                    StatusCode::UNPROCESSABLE_ENTITY,
+                    format!(
+                        "the job's visibility or lod.generate needs the scene's geometry: {e}"
+                    ),
+                )
+            })?;
+        }
+        match (parsed.visibility.mode, pvs) {
+            (optimizer::job::VisibilityMode::Precomputed, None) => {
+                return Err(err(
+                    StatusCode::UNPROCESSABLE_ENTITY,
+                    "job: visibility \"precomputed\" needs a `pvs` part (a PVS file)",
+                ));
+            }
+            (_, Some(bytes)) => {
+                optimizer::visibility::pvs::PvsFile::from_json(bytes, "pvs")
+                    .and_then(|f| f.check(objects, "pvs"))
+                    .map_err(unprocessable)?;
+            }
+            _ => {}
+        }
         if bake && !scene.starts_with(b"glTF") && scene.first() == Some(&b'{') {
             // A summary (or glTF JSON); baking needs geometry.
             optimizer::geometry::load_geometry_bytes(scene, "scene").map_err(unprocessable)?;
@@ -420,6 +472,9 @@ impl AppState {
         std::fs::create_dir_all(&dir).map_err(internal)?;
         write_atomic(&dir.join("scene"), scene).map_err(internal)?;
         write_atomic(&dir.join("job.json"), job).map_err(internal)?;
+        if let Some(p) = pvs {
+            write_atomic(&dir.join("pvs.json"), p).map_err(internal)?;
+        }
         let kind = if scene.starts_with(b"glTF") {
             "glb"
         } else {
@@ -491,6 +546,8 @@ struct JsonSubmission {
     scene: Value,
     job: Value,
     #[serde(default)]
+    pvs: Option<Value>,
+    #[serde(default)]
     bake: bool,
 }
 
@@ -504,11 +561,11 @@ async fn submit(
         .and_then(|v| v.to_str().ok())
         .unwrap_or("")
         .to_ascii_lowercase();
-    let (scene, job, bake) = if ctype.starts_with("multipart/form-data") {
+    let (scene, job, pvs, bake) = if ctype.starts_with("multipart/form-data") {
         let mut mp = <Multipart as axum::extract::FromRequest<AppState>>::from_request(req, &st)
             .await
             .map_err(|e| err(StatusCode::BAD_REQUEST, format!("bad multipart body: {e}")))?;
-        let (mut scene, mut job, mut bake) = (None, None, false);
+        let (mut scene, mut job, mut pvs, mut bake) = (None, None, None, false);
         loop {
             let field = mp.next_field().await.map_err(|e| {
                 let status = if e.status() == StatusCode::PAYLOAD_TOO_LARGE {
@@ -533,11 +590,14 @@ async fn submit(
             match name.as_str() {
                 "scene" => scene = Some(data),
                 "job" => job = Some(data),
+                "pvs" => pvs = Some(data),
                 "bake" => bake = data.as_ref() == b"true",
                 other => {
                     return Err(err(
                         StatusCode::BAD_REQUEST,
-                        format!("unknown multipart part `{other}` (expected scene, job, bake)"),
+                        format!(
+                            "unknown multipart part `{other}` (expected scene, job, pvs, bake)"
+                        ),
                     ));
                 }
             }
@@ -546,7 +606,7 @@ async fn submit(
             .ok_or_else(|| err(StatusCode::BAD_REQUEST, "multipart part `scene` is missing"))?;
         let job =
             job.ok_or_else(|| err(StatusCode::BAD_REQUEST, "multipart part `job` is missing"))?;
-        (scene.to_vec(), job.to_vec(), bake)
+        (scene.to_vec(), job.to_vec(), pvs.map(|p| p.to_vec()), bake)
     } else if ctype.starts_with("application/json") {
         let body = <Bytes as axum::extract::FromRequest<AppState>>::from_request(req, &st)
             .await
@@ -563,6 +623,10 @@ async fn submit(
         (
             serde_json::to_vec(&sub.scene).map_err(internal)?,
             serde_json::to_vec(&sub.job).map_err(internal)?,
+            match &sub.pvs {
+                Some(p) => Some(serde_json::to_vec(p).map_err(internal)?),
+                None => None,
+            },
             sub.bake,
         )
     } else {
@@ -572,7 +636,7 @@ async fn submit(
         ));
     };
     let st2 = st.clone();
-    let id = tokio::task::spawn_blocking(move || st2.submit(&scene, &job, bake))
+    let id = tokio::task::spawn_blocking(move || st2.submit(&scene, &job, pvs.as_deref(), bake))
         .await
         .map_err(internal)??;
     Ok((

@@ -47,6 +47,7 @@ pub fn openapi() -> Value {
             "placement.schema.json" => "Placement",
             "evaluation.schema.json" => "Evaluation",
             "stats.schema.json" => "Stats",
+            "pvs.schema.json" => "PvsFile",
             _ => continue,
         };
         let v: Value = serde_json::from_str(&text).unwrap_or(Value::Null);
@@ -82,15 +83,17 @@ pub fn openapi() -> Value {
             "/openapi.json": {"get": {"summary": "this document", "responses": {"200": {"description": "ok"}}}},
             "/v1/jobs": {
                 "post": {
-                    "summary": "submit a job: a GLB upload (multipart parts `scene`, `job`, optional `bake` = \"true\") or an inline scene summary",
+                    "summary": "submit a job: a GLB upload (multipart parts `scene`, `job`, optional `pvs` (a PVS file, for visibility \"precomputed\") and `bake` = \"true\") or an inline scene summary",
                     "requestBody": {"required": true, "content": {
                         "multipart/form-data": {"schema": {"type": "object", "required": ["scene", "job"], "properties": {
                             "scene": {"type": "string", "format": "binary"},
                             "job": {"$ref": "#/components/schemas/Job"},
+                            "pvs": {"$ref": "#/components/schemas/PvsFile"},
                             "bake": {"type": "string", "enum": ["true", "false"]}}}},
                         "application/json": {"schema": {"type": "object", "required": ["scene", "job"], "properties": {
                             "scene": {"$ref": "#/components/schemas/SceneSummary"},
                             "job": {"$ref": "#/components/schemas/Job"},
+                            "pvs": {"$ref": "#/components/schemas/PvsFile"},
                             "bake": {"type": "boolean"}}}}
                     }},
                     "responses": with(error_responses(&["400", "413", "415", "422", "429"]), "202", json_ok("Accepted"))
