@@ -168,6 +168,7 @@ impl SceneInput {
                 None
             },
             pvs: self.pvs.as_ref(),
+            geometry: self.geometry.as_ref(),
         }
     }
 }

@@ -79,6 +79,10 @@ pub struct VisibilityParams {
     /// Sampled mode: rays cast from each view cell. Default 8192.
     #[serde(default = "default_rays")]
     pub rays_per_region: u32,
+    /// Sampled mode: rays aimed at each object no uniform ray found, from
+    /// random points of the cell to random points on its surface. Default 2.
+    #[serde(default = "default_probes")]
+    pub probes_per_object: u32,
     /// Sampled mode: seed of the ray sampler. Default 1.
     #[serde(default = "default_seed")]
     pub seed: u64,
@@ -328,6 +332,9 @@ fn default_rays() -> u32 {
 fn default_seed() -> u64 {
     1
 }
+fn default_probes() -> u32 {
+    2
+}
 fn default_region_cells() -> u32 {
     16
 }
@@ -398,6 +405,7 @@ impl Default for VisibilityParams {
             mode: VisibilityMode::None,
             sample_spacing_m: default_sample_spacing(),
             rays_per_region: default_rays(),
+            probes_per_object: default_probes(),
             seed: default_seed(),
             max_region_cells: default_region_cells(),
         }
@@ -636,6 +644,12 @@ impl Job {
             return Err(bad(
                 "visibility.rays_per_region",
                 format!("{} must be between 1 and 10000000", v.rays_per_region),
+            ));
+        }
+        if v.probes_per_object > 1000 {
+            return Err(bad(
+                "visibility.probes_per_object",
+                format!("{} must be at most 1000", v.probes_per_object),
             ));
         }
         if !(1..=1_000_000).contains(&v.max_region_cells) {

@@ -312,14 +312,19 @@ impl AppState {
             || (job.visibility.mode != optimizer::job::VisibilityMode::None
                 && scene_bytes.starts_with(b"glTF"))
         {
-            Some(optimizer::geometry::load_geometry_bytes(&scene_bytes, "scene")?)
+            Some(optimizer::geometry::load_geometry_bytes(
+                &scene_bytes,
+                "scene",
+            )?)
         } else {
             None
         };
         let pvs_path = dir.join("pvs.json");
         let pvs = if pvs_path.exists() {
             let bytes = std::fs::read(&pvs_path).map_err(io(pvs_path.clone()))?;
-            Some(optimizer::visibility::pvs::PvsFile::from_json(&bytes, "pvs")?)
+            Some(optimizer::visibility::pvs::PvsFile::from_json(
+                &bytes, "pvs",
+            )?)
         } else {
             None
         };
@@ -422,9 +427,7 @@ impl AppState {
             optimizer::geometry::load_geometry_bytes(scene, "scene").map_err(|e| {
                 err(
                     StatusCode::UNPROCESSABLE_ENTITY,
-                    format!(
-                        "the job's visibility or lod.generate needs the scene's geometry: {e}"
-                    ),
+                    format!("the job's visibility or lod.generate needs the scene's geometry: {e}"),
                 )
             })?;
         }

@@ -115,8 +115,11 @@ pub struct CellVisibility {
     /// ray would reach an object no ray reached (objects seen by exactly one
     /// ray over all observations); 0 otherwise.
     pub missing_mass: f64,
-    /// Sampled mode: Chao1 estimate of visible objects no ray reached.
+    /// Sampled mode: Chao1 estimate of visible objects the uniform rays
+    /// missed, less those the aimed probes then found.
     pub unseen_objects: f64,
+    /// Sampled mode: objects found only by the aimed probes.
+    pub found_by_probes: u64,
     /// Precomputed mode: false when the file's cells do not cover this cell
     /// (every object then counts as visible).
     pub covered: bool,
@@ -129,6 +132,8 @@ pub struct VisibilityInputs<'a> {
     pub occluders: Option<&'a occluders::Occluders>,
     /// Ray caster (sampled mode).
     pub caster: Option<&'a RayCaster>,
+    /// The geometry the caster was built from (sampled mode's aimed rays).
+    pub geometry: Option<&'a crate::geometry::SceneGeometry>,
     /// A PVS file (precomputed mode).
     pub pvs: Option<&'a pvs::PvsFile>,
 }
@@ -191,8 +196,12 @@ pub struct VisibilityStats {
     /// Sampled mode: largest missing mass over cells.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub missing_mass_max: Option<f64>,
-    /// Sampled mode: mean over cells of the Chao1 estimate of visible
-    /// objects no ray reached.
+    /// Sampled mode: mean over cells of the objects found only by the
+    /// aimed probes.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub found_by_probes_mean: Option<f64>,
+    /// Sampled mode: mean over cells of the estimated visible objects no
+    /// ray found (Chao1 over the uniform rays, less the probes' finds).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub unseen_objects_mean: Option<f64>,
     /// Sampled mode: estimated share of a cell's visible objects that the
@@ -245,12 +254,12 @@ impl<'a> Visibility<'a> {
                 ))
             }
             VisibilityMode::Sampled => {
-                let caster = inputs.caster.ok_or_else(|| {
-                    missing(
+                let (Some(caster), Some(geometry)) = (inputs.caster, inputs.geometry) else {
+                    return Err(missing(
                         "the scene's geometry (a .glb/.gltf scene; a JSON scene summary has none)",
-                    )
-                })?;
-                Source::Sampled(sampled::Sampled::new(caster, job))
+                    ));
+                };
+                Source::Sampled(sampled::Sampled::new(caster, geometry, job))
             }
             VisibilityMode::Precomputed => {
                 let file = inputs.pvs.ok_or_else(|| {
@@ -298,6 +307,7 @@ impl<'a> Visibility<'a> {
                 set: Arc::new(c.cell_pvs(b, self.scene, self.hierarchy)),
                 missing_mass: 0.0,
                 unseen_objects: 0.0,
+                found_by_probes: 0,
                 covered: true,
             },
             Source::Sampled(s) => s.cell_pvs(b, index, self.scene),
@@ -306,12 +316,14 @@ impl<'a> Visibility<'a> {
                     set: Arc::new(set),
                     missing_mass: 0.0,
                     unseen_objects: 0.0,
+                    found_by_probes: 0,
                     covered: true,
                 },
                 None => CellVisibility {
                     set: Arc::new(ObjectSet::full(self.scene.objects.len())),
                     missing_mass: 0.0,
                     unseen_objects: 0.0,
+                    found_by_probes: 0,
                     covered: false,
                 },
             },
@@ -372,6 +384,8 @@ impl<'a> Visibility<'a> {
             }
             Source::Sampled(sm) => {
                 s.rays_per_cell = Some(sm.rays());
+                s.found_by_probes_mean =
+                    Some(done.iter().map(|c| c.found_by_probes as f64).sum::<f64>() / n);
                 s.missing_mass_mean = Some(done.iter().map(|c| c.missing_mass).sum::<f64>() / n);
                 s.missing_mass_max = Some(done.iter().map(|c| c.missing_mass).fold(0.0, f64::max));
                 s.unseen_objects_mean =
