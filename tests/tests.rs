@@ -7,3 +7,4 @@ mod cli;
 mod real_scenes;
 mod schemas;
 mod util;
+mod visibility;

@@ -19,7 +19,11 @@ fn main() -> optimizer::Result<()> {
         .and_then(|s| s.parse().ok())
         .unwrap_or(1.0);
     let t = Instant::now();
-    let glb = generate(&CityParams { seed: 1, scale, lod: false })?;
+    let glb = generate(&CityParams {
+        seed: 1,
+        scale,
+        lod: false,
+    })?;
     let geom = load_geometry_bytes(&glb, "city")?;
     println!(
         "city: {} objects, {} meshes, {} instances, {:.2} M world triangles, {:.2} M distinct ({:.1} s)",

@@ -109,11 +109,14 @@ impl PvsFile {
         self.check_shape(source)
     }
 
-    /// The union of the sets of the cells meeting `region`, or `None` when
-    /// the cells do not cover it.
+    /// The union of the sets of the cells that overlap `region` (with
+    /// positive measure along its axes of positive extent, containing it
+    /// along the others), or `None` when those cells do not cover it. A
+    /// cell's set holds for its closed box, and the closed cells that cover
+    /// a region up to measure zero cover all of it, so cells that merely
+    /// touch the region need not be counted.
     pub fn region_set(&self, region: &Aabb) -> Option<ObjectSet> {
         let mut set = ObjectSet::new(self.objects as usize);
-        // Measure along the axes where the region has extent.
         let axes: Vec<usize> = (0..3).filter(|&a| region.max[a] > region.min[a]).collect();
         let measure = |lo: [f64; 3], hi: [f64; 3]| -> f64 {
             axes.iter().map(|&a| (hi[a] - lo[a]).max(0.0)).product()
@@ -121,23 +124,19 @@ impl PvsFile {
         let full = measure(region.min.to_array(), region.max.to_array());
         let mut covered = 0.0;
         for c in &self.cells {
-            let meets = (0..3).all(|a| c.min[a] <= region.max[a] && region.min[a] <= c.max[a]);
-            if !meets {
+            let lo = [0, 1, 2].map(|a| c.min[a].max(region.min[a]));
+            let hi = [0, 1, 2].map(|a| c.max[a].min(region.max[a]));
+            let overlaps = axes.iter().all(|&a| hi[a] > lo[a])
+                && (0..3)
+                    .filter(|a| !axes.contains(a))
+                    .all(|a| c.min[a] <= region.min[a] && region.max[a] <= c.max[a]);
+            if !overlaps {
                 continue;
             }
             for &o in &c.visible {
                 set.insert(o);
             }
-            let lo = [0, 1, 2].map(|a| c.min[a].max(region.min[a]));
-            let hi = [0, 1, 2].map(|a| c.max[a].min(region.max[a]));
-            // Cells flat where the region has no extent still count if they
-            // contain the region along that axis.
-            if (0..3)
-                .filter(|a| !axes.contains(a))
-                .all(|a| c.min[a] <= region.min[a] && region.max[a] <= c.max[a])
-            {
-                covered += measure(lo, hi);
-            }
+            covered += measure(lo, hi);
         }
         (covered >= full * (1.0 - 1e-9)).then_some(set)
     }
