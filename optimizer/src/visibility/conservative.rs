@@ -573,7 +573,7 @@ impl Horizon {
                 let (inv_key, inv_near) = (1.0 / r_key, 1.0 / r_near);
                 let lo = (bot - s.y) * if bot <= s.y { inv_key } else { inv_near };
                 let hi = (top - s.y) * if top >= s.y { inv_key } else { inv_near };
-                if !(lo <= hi) {
+                if lo.is_nan() || hi.is_nan() || lo > hi {
                     continue;
                 }
                 let e = Entry { r_key, lo, hi };

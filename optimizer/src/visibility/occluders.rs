@@ -92,11 +92,15 @@ struct Component {
     double_sided: bool,
 }
 
+/// A qualifying component in local space: its triangles, its open edges and
+/// whether every material is double-sided.
+type LocalComponent = (Vec<[Vec3; 3]>, Vec<[Vec3; 2]>, bool);
+
 /// Topology of one mesh set, in local space (shared by every instance).
 #[derive(Default)]
 struct LocalSolids {
-    /// Per qualifying component: its triangles (local positions) and open edges.
-    components: Vec<(Vec<[Vec3; 3]>, Vec<[Vec3; 2]>, bool)>,
+    /// Per qualifying component.
+    components: Vec<LocalComponent>,
     rejected: u64,
 }
 
