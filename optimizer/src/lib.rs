@@ -33,6 +33,7 @@ pub mod placement;
 pub mod problem_views;
 pub mod raster;
 pub mod raycast;
+pub mod report;
 pub mod rng;
 pub mod scene;
 pub mod schema;

@@ -1,0 +1,198 @@
+//! Memory-versus-frame-time comparison reports (`impostor report`, DESIGN
+//! §1, §2.10, §2.11): several placement methods and knob sweeps on one
+//! scene and view space, each run checked by the same evaluation, written
+//! as a self-contained HTML page with SVG charts plus JSON and CSV data.
+//!
+//! This module holds the report's data ([`Report`], written as
+//! `report.json`); [`render`] turns it into HTML and CSV.
+
+pub mod render;
+
+use schemars::JsonSchema;
+use serde::{Deserialize, Serialize};
+
+use crate::placement::StageTime;
+
+/// A whole report (`report.json`).
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize, JsonSchema)]
+pub struct Report {
+    /// Version of the tool that made it.
+    pub version: String,
+    /// When it was made (UTC, RFC 3339).
+    pub created: String,
+    /// The machine it ran on.
+    pub machine: Machine,
+    /// The scene.
+    pub scene: SceneInfo,
+    /// The base job (every run starts from it), as given.
+    pub job: serde_json::Value,
+    /// The methods compared, in the order given.
+    pub methods: Vec<String>,
+    /// The knob sweeps, in the order given.
+    pub sweeps: Vec<Sweep>,
+    /// Every (method, setting) run.
+    pub runs: Vec<Run>,
+    /// Frame times along a walkthrough path, per (method, target).
+    pub walkthroughs: Vec<Walkthrough>,
+    /// Stability under perturbed inputs (`--stability`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub stability: Option<Stability>,
+}
+
+/// The machine a report ran on.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize, JsonSchema)]
+pub struct Machine {
+    /// Operating system and architecture, e.g. `linux x86_64`.
+    pub os: String,
+    /// Worker threads used.
+    pub threads: usize,
+    /// CPU model, when known.
+    pub cpu: String,
+    /// Total memory, bytes (0 when unknown).
+    pub memory_bytes: u64,
+}
+
+/// The scene of a report.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize, JsonSchema)]
+pub struct SceneInfo {
+    /// File name.
+    pub name: String,
+    /// Objects.
+    pub objects: u64,
+    /// Triangles.
+    pub triangles: u64,
+    /// Bounds minimum.
+    pub min: [f64; 3],
+    /// Bounds maximum.
+    pub max: [f64; 3],
+}
+
+/// One knob swept over values (`--sweep knob=v1,v2,...`).
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize, JsonSchema)]
+pub struct Sweep {
+    /// The knob: a dotted job field (`target_frame_time_ms`,
+    /// `problem_views.cell_size`, ...) or a method knob (`env_map.far_m`).
+    pub knob: String,
+    /// Its values.
+    pub values: Vec<f64>,
+}
+
+/// The outcome of one placement run and its evaluation.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize, JsonSchema)]
+pub struct Run {
+    /// The method (`shafts`, `boxes`, `both`, `per-cell`, `env-map`,
+    /// `shafts+prune`).
+    pub method: String,
+    /// The swept knob of this run, or `None` for the base job.
+    pub knob: Option<String>,
+    /// The knob's value in this run.
+    pub value: Option<f64>,
+    /// The run's target frame time, ms.
+    pub target_frame_time_ms: f64,
+    /// `ok`, or `failed` (see `error`).
+    pub status: String,
+    /// Why the run failed.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub error: Option<String>,
+    /// Conservative problem views.
+    pub cpvs: u64,
+    /// Candidates.
+    pub candidates: u64,
+    /// Impostors placed.
+    pub impostors: u64,
+    /// Impostor memory, bytes.
+    pub memory_bytes: u64,
+    /// Problem views still above the target.
+    pub unsolved_cpvs: u64,
+    /// Preprocessing wall time (placement), seconds.
+    pub seconds: f64,
+    /// Wall time per stage.
+    pub stage_seconds: Vec<StageTime>,
+    /// The evaluation (absent when the run failed).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub eval: Option<EvalSummary>,
+}
+
+/// The independent evaluation of one run.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize, JsonSchema)]
+pub struct EvalSummary {
+    /// Views sampled.
+    pub views: u64,
+    /// Largest view time, ms.
+    pub max_ms: f64,
+    /// 99th percentile, ms.
+    pub p99_ms: f64,
+    /// Median, ms.
+    pub p50_ms: f64,
+    /// Mean, ms.
+    pub mean_ms: f64,
+    /// Views over the target.
+    pub violations: u64,
+    /// Views over the target in solved problem views or in none (must be
+    /// 0: the guarantee).
+    pub violations_in_solved: u64,
+    /// Largest view time among views in solved problem views or in none, ms.
+    pub max_ms_in_solved: f64,
+}
+
+/// Frame times along a walkthrough path.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize, JsonSchema)]
+pub struct Walkthrough {
+    /// The method.
+    pub method: String,
+    /// The target frame time, ms.
+    pub target_frame_time_ms: f64,
+    /// Frame time of each frame along the path, ms.
+    pub frame_ms: Vec<f64>,
+}
+
+/// Stability of each method under perturbed inputs.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize, JsonSchema)]
+pub struct Stability {
+    /// Per method.
+    pub methods: Vec<MethodStability>,
+}
+
+/// One method's results under each perturbation and their spread.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize, JsonSchema)]
+pub struct MethodStability {
+    /// The method.
+    pub method: String,
+    /// One entry per perturbation (the first is the unperturbed base).
+    pub settings: Vec<Perturbed>,
+    /// Spread of impostor memory over the settings, bytes.
+    pub memory: Spread,
+    /// Spread of the impostor count over the settings.
+    pub impostors: Spread,
+}
+
+/// A run under one perturbation.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize, JsonSchema)]
+pub struct Perturbed {
+    /// What was perturbed, e.g. `target +5%`, `grid shifted 0.5 cell`,
+    /// `objects shuffled (seed 2)`.
+    pub label: String,
+    /// `ok` or `failed`.
+    pub status: String,
+    /// Impostor memory, bytes.
+    pub memory_bytes: u64,
+    /// Impostors.
+    pub impostors: u64,
+    /// Unsolved problem views.
+    pub unsolved_cpvs: u64,
+    /// Largest evaluated view time, ms (0 when not evaluated).
+    pub max_ms: f64,
+}
+
+/// Minimum, maximum, mean and relative spread of a quantity.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize, JsonSchema)]
+pub struct Spread {
+    /// Smallest value.
+    pub min: f64,
+    /// Largest value.
+    pub max: f64,
+    /// Mean.
+    pub mean: f64,
+    /// Standard deviation over the mean (0 when the mean is 0).
+    pub relative_std: f64,
+}

@@ -1,0 +1,1 @@
+//! HTML and CSV rendering of a [`super::Report`] (placeholder).
