@@ -197,7 +197,7 @@ pub struct LodStats {
 }
 
 /// Wall time of one stage.
-#[derive(Clone, Debug, Serialize, Deserialize, JsonSchema)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
 pub struct StageTime {
     /// Stage name.
     pub stage: String,
