@@ -22,7 +22,7 @@ use rayon::prelude::*;
 
 use crate::geom::Aabb;
 use crate::impostor_model::{ImpostorModel, ImpostorSpec, ViewCell};
-use crate::job::{Job, ViewCellKind};
+use crate::job::{Job, Method};
 use crate::problem_views::{Context, ProblemViews};
 
 /// One impostor candidate.
@@ -159,6 +159,41 @@ impl AxisGrid {
     }
 }
 
+/// The widest angle between `axis` and any of the unit directions `dirs`.
+fn widest_angle(dirs: &[DVec3], axis: DVec3) -> f64 {
+    dirs.iter()
+        .map(|w| w.dot(axis).clamp(-1.0, 1.0).acos())
+        .fold(0.0, f64::max)
+}
+
+/// A narrow cone around unit directions `dirs`, starting from `axis`: a few
+/// steps of moving the axis towards the farthest direction (Bădoiu and
+/// Clarkson's core-set iteration on the sphere); returns the best axis seen
+/// and its widest angle, never worse than `axis`'s own.
+fn fit_cone(dirs: &[DVec3], axis: DVec3) -> (DVec3, f64) {
+    let mut best = (axis, widest_angle(dirs, axis));
+    let mut a = axis;
+    for k in 1..=16 {
+        let Some(far) = dirs
+            .iter()
+            .copied()
+            .min_by(|x, y| x.dot(a).total_cmp(&y.dot(a)))
+        else {
+            break;
+        };
+        let next = (a + (far - a) / (f64::from(k) + 1.0)).normalize_or_zero();
+        if next == DVec3::ZERO {
+            break;
+        }
+        a = next;
+        let w = widest_angle(dirs, a);
+        if w < best.1 {
+            best = (a, w);
+        }
+    }
+    best
+}
+
 /// A candidate key, sortable and deduplicated per node.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord)]
 enum Key {
@@ -171,9 +206,11 @@ pub fn generate(ctx: &Context, job: &Job, pv: &ProblemViews) -> Candidates {
     let h = ctx.hierarchy;
     let imodel = ImpostorModel::new(job);
     let grid = AxisGrid::new(job);
-    let kinds = job.candidates.view_cells;
-    let shafts = matches!(kinds, ViewCellKind::Shafts | ViewCellKind::Both);
-    let boxes = matches!(kinds, ViewCellKind::Boxes | ViewCellKind::Both);
+    let method = job.method();
+    let shafts = matches!(method, Method::Shafts | Method::Both | Method::ShaftsPrune);
+    let boxes = matches!(method, Method::Boxes | Method::Both | Method::PerCell);
+    // Per-cell: one box size only, the cells' ancestors `level` levels up.
+    let per_cell = (method == Method::PerCell).then_some(job.per_cell.level);
     let mut alphas: Vec<f64> = job
         .candidates
         .apex_angles_deg
@@ -289,7 +326,21 @@ pub fn generate(ctx: &Context, job: &Job, pv: &ProblemViews) -> Candidates {
                         });
                     }
                 }
-                if boxes {
+                if let Some(level) = per_cell {
+                    let mut kd = first.kd;
+                    for _ in 0..level {
+                        let up = pv.kd[kd as usize].parent;
+                        if up == u32::MAX {
+                            break;
+                        }
+                        kd = up;
+                    }
+                    if let Some(spec) = imodel.boxed(&sphere, &pv.kd[kd as usize].aabb)
+                        && helps(&spec)
+                    {
+                        tuples.push((Key::Box { kd }, g));
+                    }
+                } else if boxes {
                     let mut kd = first.kd;
                     while kd != u32::MAX {
                         let node = &pv.kd[kd as usize];
@@ -369,12 +420,32 @@ pub fn generate(ctx: &Context, job: &Job, pv: &ProblemViews) -> Candidates {
                     let cand = match tuples[s].0 {
                         Key::Shaft { angle, m, j, k } => {
                             let alpha = alphas[angle as usize];
-                            let d = size * f64::from(1u32 << k.min(31));
+                            // The shaft starts where its nearest served
+                            // cell does (never before `size·2^k`): the same
+                            // cells are served, at the resolution and layer
+                            // count their distance needs.
+                            let nearest = tuples[i..t]
+                                .iter()
+                                .map(|&(_, g)| groups[g as usize].dist)
+                                .fold(f64::INFINITY, f64::min);
+                            let d = (size * f64::from(1u32 << k.min(31))).max(nearest);
+                            // Likewise it narrows, around an axis re-aimed
+                            // at the served cells, to the widest angle of
+                            // their corners.
+                            let dirs: Vec<DVec3> = tuples[i..t]
+                                .iter()
+                                .flat_map(|&(_, g)| {
+                                    pv.kd[groups[g as usize].kd as usize].aabb.corners()
+                                })
+                                .map(|p| (p - sphere.center).normalize())
+                                .collect();
+                            let (axis, widest) = fit_cone(&dirs, grid.axis(m, j));
+                            let alpha = alpha.min(widest * (1.0 + 1e-9) + 1e-12);
                             imodel.shaft(&sphere, alpha, d).map(|spec| Candidate {
                                 node: n,
                                 cell: ViewCell::Shaft {
                                     apex: sphere.center,
-                                    axis: grid.axis(m, j),
+                                    axis,
                                     half_angle: alpha,
                                     min_distance: d,
                                 },

@@ -532,9 +532,51 @@ pub fn evaluate_input(
         ));
     }
     let scene = &input.scene;
-    let prepared = prepare(scene, job, placement, source)?;
     let h = Hierarchy::build(scene);
     let vis = Visibility::new(job, scene, &h, input.visibility_inputs(job))?;
+    evaluate_shared(
+        input,
+        job,
+        placement,
+        opts,
+        source,
+        &Shared {
+            hierarchy: &h,
+            visibility: vis.as_ref(),
+        },
+    )
+}
+
+/// What evaluations of one scene and view-space grid can share: the object
+/// hierarchy and the visibility (whose cells are computed once).
+#[derive(Clone, Copy)]
+pub struct Shared<'a> {
+    /// The object hierarchy of the scene.
+    pub hierarchy: &'a Hierarchy,
+    /// The job's visibility, `None` for mode `none`.
+    pub visibility: Option<&'a Visibility<'a>>,
+}
+
+/// [`evaluate_input`] with a shared hierarchy and visibility (built for the
+/// same scene and for a job with the same view space, grid and visibility).
+pub fn evaluate_shared(
+    input: &SceneInput,
+    job: &Job,
+    placement: &Placement,
+    opts: &EvalOptions,
+    source: &str,
+    shared: &Shared,
+) -> Result<Evaluation> {
+    if opts.views == 0 || opts.views > 100_000_000 {
+        return Err(Error::bad(
+            "--views",
+            format!("{} must be between 1 and 100000000", opts.views),
+        ));
+    }
+    let scene = &input.scene;
+    let prepared = prepare(scene, job, placement, source)?;
+    let h = shared.hierarchy;
+    let vis = shared.visibility;
     let model = CostModel::new(job);
     let t_max = job.target_frame_time_ms;
     let [w, hgt] = job.camera.resolution;
@@ -548,7 +590,7 @@ pub fn evaluate_input(
         (eye, dir, rng)
     };
     let mut cells_used: Vec<[u32; 3]> = Vec::new();
-    if let Some(v) = &vis {
+    if let Some(v) = vis {
         cells_used = (0..opts.views)
             .into_par_iter()
             .map(|i| prepared.grid.cell_of(view_of(i).0).expect("inside"))
@@ -587,11 +629,11 @@ pub fn evaluate_input(
             let outside = imps
                 .iter()
                 .any(|&i| !prepared.impostors[i as usize].cell.contains_point(eye));
-            let set = vis.as_ref().map(|v| &v.cell(cell).set);
+            let set = vis.map(|v| &v.cell(cell).set);
             let mut culled = Vec::new();
             let t = view_time(
                 scene,
-                &h,
+                h,
                 &model,
                 &f,
                 replaced,
@@ -640,7 +682,7 @@ pub fn evaluate_input(
         .map(|s| s.time)
         .collect();
     let within: Vec<f64> = times.iter().copied().filter(|&t| !over(t)).collect();
-    let visibility = vis.as_ref().map(|_| {
+    let visibility = vis.map(|_| {
         let n = samples.len() as f64;
         let objects = scene.objects.len().max(1) as f64;
         let mean_visible = samples.iter().map(|s| s.visible as f64).sum::<f64>() / n;
@@ -698,4 +740,108 @@ pub fn evaluate_input(
         image: None,
         visibility,
     })
+}
+
+/// The views of a walkthrough: `frames` points evenly spaced along the
+/// job's path (or, without one, a closed loop through the view space at
+/// mid-height: an ellipse over 80 % of its extent), each looking along the
+/// path, level.
+pub fn walkthrough_views(job: &Job) -> Vec<(DVec3, DVec3)> {
+    let (lo, hi) = (job.vs_min(), job.vs_max());
+    let (points, frames): (Vec<DVec3>, u32) = match &job.walkthrough {
+        Some(w) => (
+            w.points.iter().map(|p| DVec3::from_array(*p)).collect(),
+            w.frames,
+        ),
+        None => {
+            let c = (lo + hi) * 0.5;
+            let r = (hi - lo) * 0.4;
+            let n = 256;
+            (
+                (0..=n)
+                    .map(|i| {
+                        let a = std::f64::consts::TAU * f64::from(i) / f64::from(n);
+                        DVec3::new(c.x + r.x * a.cos(), c.y, c.z + r.z * a.sin())
+                    })
+                    .collect(),
+                1000,
+            )
+        }
+    };
+    // Arc length along the polyline.
+    let mut acc = vec![0.0];
+    for w in points.windows(2) {
+        let l = acc.last().copied().unwrap_or(0.0) + w[0].distance(w[1]);
+        acc.push(l);
+    }
+    let total = acc.last().copied().unwrap_or(0.0);
+    (0..frames)
+        .map(|f| {
+            let s = total * f64::from(f) / f64::from(frames.max(2) - 1);
+            let k = acc
+                .partition_point(|&a| a <= s)
+                .saturating_sub(1)
+                .min(points.len() - 2);
+            let seg = acc[k + 1] - acc[k];
+            let t = if seg > 0.0 { (s - acc[k]) / seg } else { 0.0 };
+            let p = points[k].lerp(points[k + 1], t).clamp(lo, hi);
+            let mut dir = points[k + 1] - points[k];
+            dir.y = 0.0;
+            if dir.length_squared() < 1e-18 {
+                dir = DVec3::X;
+            }
+            (p, dir.normalize())
+        })
+        .collect()
+}
+
+/// Frame time of each given view `(eye, direction)` with `placement`'s
+/// impostors (the views' problem views' impostors swapped in) and the
+/// visible sets of their cells: the frame-time curve of a walkthrough.
+pub fn frame_times(
+    input: &SceneInput,
+    job: &Job,
+    placement: &Placement,
+    views: &[(DVec3, DVec3)],
+    source: &str,
+    shared: &Shared,
+) -> Result<Vec<f64>> {
+    let scene = &input.scene;
+    let prepared = prepare(scene, job, placement, source)?;
+    let model = CostModel::new(job);
+    let [w, hgt] = job.camera.resolution;
+    let aspect = f64::from(w) / f64::from(hgt);
+    Ok(views
+        .par_iter()
+        .map(|&(eye, dir)| {
+            let f = ViewFrustum::new(eye, dir, job.camera.fov_deg, aspect);
+            let Some(cell) = prepared.grid.cell_of(eye) else {
+                return f64::NAN;
+            };
+            let vdi = Vdi::containing(dir, prepared.level);
+            let cpv = prepared
+                .lookup
+                .get(&(prepared.grid.linear(cell), vdi))
+                .copied();
+            let (replaced, imps): (&[u32], &[u32]) = match cpv {
+                Some(c) => (
+                    &prepared.cpv_replaced[c as usize],
+                    &prepared.cpv_impostors[c as usize],
+                ),
+                None => (&[], &[]),
+            };
+            let set = shared.visibility.map(|v| &v.cell(cell).set);
+            view_time(
+                scene,
+                shared.hierarchy,
+                &model,
+                &f,
+                replaced,
+                imps,
+                &prepared,
+                set.map(|s| &**s),
+                None,
+            )
+        })
+        .collect())
 }

@@ -146,6 +146,58 @@ impl SceneInput {
         Ok(input)
     }
 
+    /// The same input with its objects in another order (a permutation
+    /// drawn from `seed`): object ids, geometry instances and PVS entries are
+    /// renumbered consistently. Used to check that a placement method does
+    /// not depend on the order objects happen to be listed in.
+    pub fn shuffled(&self, seed: u64) -> SceneInput {
+        let n = self.scene.objects.len();
+        let mut order: Vec<u32> = (0..n as u32).collect();
+        let mut rng = crate::rng::Rng::new(seed);
+        for i in (1..n).rev() {
+            let j = (rng.next_u64() % (i as u64 + 1)) as usize;
+            order.swap(i, j);
+        }
+        // order[new] = old; new_id[old] = new.
+        let mut new_id = vec![0u32; n];
+        for (new, &old) in order.iter().enumerate() {
+            new_id[old as usize] = new as u32;
+        }
+        let scene = Scene {
+            objects: order
+                .iter()
+                .map(|&old| self.scene.objects[old as usize].clone())
+                .collect(),
+        };
+        let geometry = self.geometry.as_ref().map(|g| {
+            let mut g = g.clone();
+            for inst in &mut g.instances {
+                inst.object = new_id[inst.object as usize];
+            }
+            g.instances.sort_by_key(|i| i.object);
+            g
+        });
+        let pvs = self.pvs.as_ref().map(|f| {
+            let mut f = f.clone();
+            for c in &mut f.cells {
+                for o in &mut c.visible {
+                    *o = new_id.get(*o as usize).copied().unwrap_or(*o);
+                }
+                c.visible.sort_unstable();
+            }
+            f
+        });
+        SceneInput {
+            scene,
+            geometry,
+            pvs,
+            occluders: self.occluders.clone(),
+            lod: self.lod.clone(),
+            seconds: self.seconds.clone(),
+            caster: OnceLock::new(),
+        }
+    }
+
     /// A scene without geometry, for jobs that do not need any.
     pub fn from_scene(scene: &Scene, job: &Job) -> Result<SceneInput> {
         SceneInput::new(scene.clone(), None, None, job)

@@ -15,6 +15,7 @@ pub mod bake;
 pub mod candidates;
 pub mod citygen;
 pub mod cost;
+pub mod env_map;
 pub mod error;
 pub mod evaluate;
 pub mod geom;

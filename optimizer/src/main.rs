@@ -6,7 +6,7 @@ use std::process::ExitCode;
 use clap::{Parser, Subcommand};
 use optimizer::evaluate::{EvalOptions, evaluate_input};
 use optimizer::input::{SceneInput, needs_geometry};
-use optimizer::job::{Job, MemoryParams, VisibilityMode};
+use optimizer::job::{Job, MemoryParams, Method, VisibilityMode};
 use optimizer::pipeline::{Control, PlaceOptions, place_input};
 use optimizer::placement::Placement;
 use optimizer::visibility::pvs::{PvsCell, PvsFile};
@@ -48,6 +48,10 @@ enum Command {
         /// Precomputed PVS file (for `"visibility": "precomputed"`).
         #[arg(long)]
         pvs: Option<PathBuf>,
+        /// Placement method (overrides the job's `method`): shafts, boxes,
+        /// both, per-cell, env-map or shafts+prune.
+        #[arg(long)]
+        method: Option<String>,
     },
     /// Check a placement independently with random views and exact frusta.
     Evaluate {
@@ -148,6 +152,11 @@ enum Command {
         /// and their full-detail geometry are unchanged.
         #[arg(long)]
         lod: bool,
+        /// Generate the failure scene of the comparison reports instead: a
+        /// street lined with small, expensive statues next to the view space
+        /// (use with fixtures/jobs/failure.json).
+        #[arg(long)]
+        failure: bool,
         /// Output file (default: standard output for --summary; required for GLB).
         #[arg(short, long)]
         out: Option<PathBuf>,
@@ -245,6 +254,18 @@ fn json(value: &impl serde::Serialize) -> Result<Vec<u8>> {
     optimizer::to_json_bytes(value)
 }
 
+fn parse_method(name: &str) -> Result<Method> {
+    Method::parse(name).ok_or_else(|| {
+        Error::bad(
+            "--method",
+            format!(
+                "unknown method {name:?}; expected one of {}",
+                Method::ALL.map(Method::name).join(", ")
+            ),
+        )
+    })
+}
+
 fn is_gltf(path: &Path) -> bool {
     path.extension()
         .and_then(|e| e.to_str())
@@ -293,10 +314,14 @@ fn run(cli: Cli) -> Result<ExitCode> {
             prune,
             verbose,
             pvs,
+            method,
         } => {
             set_threads(threads)?;
             let job_path = job.display().to_string();
-            let job = read_job(&job)?;
+            let mut job = read_job(&job)?;
+            if let Some(m) = method {
+                job.method = Some(parse_method(&m)?);
+            }
             let input = load_input(&scene, pvs.as_deref(), &job, &job_path, false)?;
             let output = place_input(
                 &input,
@@ -531,9 +556,14 @@ fn run(cli: Cli) -> Result<ExitCode> {
             scale,
             summary,
             lod,
+            failure,
             out,
         } => {
-            let glb = citygen::generate(&citygen::CityParams { seed, scale, lod })?;
+            let glb = if failure {
+                citygen::generate_failure(seed)?
+            } else {
+                citygen::generate(&citygen::CityParams { seed, scale, lod })?
+            };
             if summary {
                 let scene = gltf_load::load_scene_bytes(&glb, "generated city")?;
                 write_output(out.as_deref(), &json(&scene.summary())?)?;

@@ -7,11 +7,12 @@ use std::time::Instant;
 use indicatif::{ProgressBar, ProgressStyle};
 
 use crate::candidates::{self, Candidates};
+pub use crate::evaluate::Shared;
 use crate::greedy::{self, Selection};
 use crate::hierarchy::Hierarchy;
 use crate::impostor_model::ViewCell;
 use crate::input::SceneInput;
-use crate::job::Job;
+use crate::job::{Job, Method};
 use crate::placement::{
     DirectionsJson, PlacedCpv, PlacedImpostor, Placement, RegionJson, SphereJson, StageTime, Stats,
     Summary, ViewCellJson, peak_rss_bytes,
@@ -169,21 +170,47 @@ pub fn place_input(
     ctl: &Control,
 ) -> Result<PlaceOutput> {
     let scene = &input.scene;
+    let start = Instant::now();
+    let hierarchy = Hierarchy::build(scene);
+    let hierarchy_seconds = start.elapsed().as_secs_f64();
+    let visibility = Visibility::new(job, scene, &hierarchy, input.visibility_inputs(job))?;
+    let shared = Shared {
+        hierarchy: &hierarchy,
+        visibility: visibility.as_ref(),
+    };
+    let mut out = place_shared(input, job, opts, ctl, &shared)?;
+    out.stats.seconds.insert(
+        input.seconds.len(),
+        StageTime {
+            stage: "hierarchy".into(),
+            seconds: hierarchy_seconds,
+        },
+    );
+    Ok(out)
+}
+
+/// [`place_input`] with a shared hierarchy and visibility (built for the
+/// same scene and for a job with the same view space, grid and
+/// visibility): runs that differ only in their target, method or candidate
+/// knobs compute visible sets once.
+pub fn place_shared(
+    input: &SceneInput,
+    job: &Job,
+    opts: &PlaceOptions,
+    ctl: &Control,
+    shared: &Shared,
+) -> Result<PlaceOutput> {
+    let scene = &input.scene;
+    let hierarchy = shared.hierarchy;
+    let visibility = shared.visibility;
     let mut st = Stages::new(opts.progress, opts.verbose);
     st.times.extend(input.seconds.iter().cloned());
-    ctl.progress("hierarchy", 0.0);
-    st.begin("building the object hierarchy");
-    let hierarchy = Hierarchy::build(scene);
-    st.end("hierarchy");
-    ctl.check()?;
     ctl.progress("problem_views", 0.01);
-
-    let visibility = Visibility::new(job, scene, &hierarchy, input.visibility_inputs(job))?;
     st.begin("approximating the problem view space");
-    let mut ctx = Context::new(scene, &hierarchy, job);
+    let mut ctx = Context::new(scene, hierarchy, job);
     ctx.pair_budget = opts.max_pairs.unwrap_or(problem_views::MAX_PAIRS);
     ctx.cancel = ctl.cancel;
-    ctx.visibility = visibility.as_ref();
+    ctx.visibility = visibility;
     let pv = problem_views::approximate(&ctx, job);
     st.end("problem_views");
     if ctx.over_budget() {
@@ -199,6 +226,45 @@ pub fn place_input(
         ));
     }
     ctl.check()?;
+    let method = job.method();
+    if method == Method::EnvMap {
+        ctl.progress("env_map", 0.1);
+        st.begin("placing environment maps");
+        let em = crate::env_map::place(&ctx, job, &pv);
+        st.end("env_map");
+        ctl.check()?;
+        st.begin("writing the placement");
+        let placement = assemble(
+            &ctx,
+            job,
+            &pv,
+            em.impostors,
+            em.cpv_impostors,
+            &em.cpv_cost,
+            0,
+        );
+        st.end("placement");
+        let stats = Stats {
+            threads: rayon::current_num_threads(),
+            objects: scene.objects.len() as u64,
+            triangles: scene.total_triangles(),
+            hierarchy_nodes: hierarchy.nodes.len() as u64,
+            cells: pv.grid.len(),
+            regions_visited: pv.regions_visited,
+            enclosing_frusta: pv.cone_evaluations,
+            cpvs: pv.cpvs.len() as u64,
+            impostors: placement.summary.impostors,
+            memory_bytes: placement.summary.memory_bytes,
+            unsolved_cpvs: placement.summary.unsolved_cpvs,
+            seconds: std::mem::take(&mut st.times),
+            peak_rss_bytes: peak_rss_bytes(),
+            visibility: visibility.map(Visibility::stats),
+            lod: ctx.lod_stats(input.lod.clone()),
+            ..Stats::default()
+        };
+        ctl.progress("placement", 1.0);
+        return Ok(PlaceOutput { placement, stats });
+    }
     ctl.progress("candidates", 0.1);
 
     st.begin(&format!("generating candidates for {} CPVs", pv.cpvs.len()));
@@ -228,7 +294,7 @@ pub fn place_input(
     });
     st.end("greedy");
     ctl.check()?;
-    if opts.prune {
+    if opts.prune || method == Method::ShaftsPrune {
         st.begin("pruning");
         greedy::prune(&ctx, &pv, &cands, &mut sel);
         st.end("prune");
@@ -258,7 +324,7 @@ pub fn place_input(
         unsolved_cpvs: placement.summary.unsolved_cpvs,
         seconds: std::mem::take(&mut st.times),
         peak_rss_bytes: peak_rss_bytes(),
-        visibility: visibility.as_ref().map(Visibility::stats),
+        visibility: visibility.map(Visibility::stats),
         lod: ctx.lod_stats(input.lod.clone()),
     };
     ctl.progress("placement", 1.0);
@@ -320,18 +386,42 @@ pub fn build_placement(
             }
         })
         .collect();
+    let cpv_impostors: Vec<Vec<u32>> = sel
+        .cpv_impostors
+        .iter()
+        .map(|imps| imps.iter().map(|&i| new_id[i as usize]).collect())
+        .collect();
+    assemble(
+        ctx,
+        job,
+        pv,
+        impostors,
+        cpv_impostors,
+        &sel.cpv_cost,
+        cands.list.len() as u64,
+    )
+}
+
+/// The placement JSON of `impostors` (ids are indices) used by the CPVs as
+/// `cpv_impostors` says, with the CPVs' final costs.
+pub fn assemble(
+    ctx: &Context,
+    job: &Job,
+    pv: &ProblemViews,
+    impostors: Vec<PlacedImpostor>,
+    cpv_impostors: Vec<Vec<u32>>,
+    cpv_cost: &[crate::cost::Cost],
+    candidates: u64,
+) -> Placement {
     let mut unsolved = 0u64;
     let cpvs: Vec<PlacedCpv> = pv
         .cpvs
         .iter()
+        .zip(cpv_impostors)
         .enumerate()
-        .map(|(ci, c)| {
-            let mut imps: Vec<u32> = sel.cpv_impostors[ci]
-                .iter()
-                .map(|&i| new_id[i as usize])
-                .collect();
+        .map(|(ci, (c, mut imps))| {
             imps.sort_unstable();
-            let final_ms = ctx.model.frame_time(sel.cpv_cost[ci]);
+            let final_ms = ctx.model.frame_time(cpv_cost[ci]);
             let solved = final_ms <= job.target_frame_time_ms;
             unsolved += u64::from(!solved);
             PlacedCpv {
@@ -355,7 +445,7 @@ pub fn build_placement(
     Placement {
         summary: Summary {
             cpvs: cpvs.len() as u64,
-            candidates: cands.list.len() as u64,
+            candidates,
             impostors: impostors.len() as u64,
             memory_bytes: impostors.iter().map(|i| i.memory_bytes).sum(),
             unsolved_cpvs: unsolved,
@@ -370,6 +460,7 @@ pub fn build_placement(
 mod tests {
     use super::*;
     use crate::evaluate::{EvalOptions, evaluate};
+    use crate::job::Method;
     use crate::testutil::{synthetic_city, synthetic_job};
 
     fn run(threads: usize, seed: u64) -> Placement {
@@ -536,6 +627,76 @@ mod tests {
         ctx.cancel = Some(&flag);
         assert!(candidates::generate(&ctx, &job, &pv).list.is_empty());
         assert!(problem_views::approximate(&ctx, &job).cpvs.is_empty());
+    }
+
+    #[test]
+    fn every_method_gives_a_placement_that_passes_the_check() {
+        let scene = synthetic_city(3, 5, 5);
+        let base = synthetic_job(5, 5);
+        let mut memory = Vec::new();
+        for m in Method::ALL {
+            let mut job = base.clone();
+            job.method = Some(m);
+            job.env_map.far_m = 60.0;
+            job.env_map.cell_m = 40.0;
+            let p = place(&scene, &job, &PlaceOptions::default())
+                .unwrap()
+                .placement;
+            assert!(p.summary.cpvs > 0, "{m:?}");
+            assert!(p.summary.impostors > 0, "{m:?}: {:?}", p.summary);
+            let eval = evaluate(
+                &scene,
+                &job,
+                &p,
+                &EvalOptions {
+                    views: 2000,
+                    seed: 4,
+                    ..EvalOptions::default()
+                },
+                "p.json",
+            )
+            .unwrap();
+            assert_eq!(eval.violations_in_solved, 0, "{m:?}: {eval:?}");
+            assert_eq!(eval.impostors_outside_view_cell, 0, "{m:?}");
+            // No object twice in one CPV.
+            for c in &p.cpvs {
+                let mut objs: Vec<u32> = c
+                    .impostors
+                    .iter()
+                    .flat_map(|&i| p.impostors[i as usize].objects.clone())
+                    .collect();
+                let n = objs.len();
+                objs.sort_unstable();
+                objs.dedup();
+                assert_eq!(n, objs.len(), "{m:?}");
+            }
+            memory.push((m, p.summary.memory_bytes));
+        }
+        let mem = |m: Method| memory.iter().find(|x| x.0 == m).unwrap().1;
+        // Pruning never adds memory; per-cell never shares across cells, so
+        // it cannot beat boxes, which may use the same cells and more.
+        assert!(mem(Method::ShaftsPrune) <= mem(Method::Shafts));
+        assert!(mem(Method::Both) <= mem(Method::Shafts).max(mem(Method::Boxes)));
+    }
+
+    #[test]
+    fn per_cell_impostors_serve_one_cell_each() {
+        let scene = synthetic_city(2, 5, 5);
+        let mut job = synthetic_job(5, 5);
+        job.method = Some(Method::PerCell);
+        let p = place(&scene, &job, &PlaceOptions::default())
+            .unwrap()
+            .placement;
+        assert!(p.summary.impostors > 0);
+        for imp in &p.impostors {
+            let cells: std::collections::BTreeSet<String> = p
+                .cpvs
+                .iter()
+                .filter(|c| c.impostors.contains(&imp.id))
+                .map(|c| format!("{:?}", c.region.min))
+                .collect();
+            assert_eq!(cells.len(), 1, "impostor {} serves {cells:?}", imp.id);
+        }
     }
 
     #[test]

@@ -7,6 +7,7 @@
 //! `report.json`); [`render`] turns it into HTML and CSV.
 
 pub mod render;
+pub mod run;
 
 use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};

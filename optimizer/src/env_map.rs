@@ -1,0 +1,271 @@
+//! The environment-map method (paper test 15, after Jeschke et al. 2002):
+//! the view space is cut into view cells of `env_map.cell_m` (a whole number
+//! of grid cells), and for every cell everything visible that lies entirely
+//! beyond `env_map.far_m` becomes layered environment-map impostors; nearer
+//! objects stay geometry. No frame-time target steers it: it gives no
+//! guarantee, and the placement reports which problem views stay above the
+//! target.
+//!
+//! Per cell and cube face (seen from the cell's centre) the far objects are
+//! split into layers evenly spaced in `1/z`, as many as the box view-cell
+//! criterion needs (`n = ⌈r·(1/z_n − 1/z_f)/(2εθ)⌉`, `r` the cell's
+//! half-diagonal); each (face, layer) holding objects is one impostor of one
+//! layer whose texture covers its objects' projection on the face plane at
+//! one texel per pixel angle `θ` (tiled where it exceeds the largest texture
+//! size). Memory uses the same texel model as every other method.
+
+use glam::DVec3;
+use rayon::prelude::*;
+
+use crate::cost::Cost;
+use crate::geom::{Aabb, Sphere, enclosing_cone, face_coords};
+use crate::impostor_model::ImpostorModel;
+use crate::job::Job;
+use crate::placement::{PlacedImpostor, SphereJson, ViewCellJson};
+use crate::problem_views::{Context, ProblemViews, RegionCosts};
+use crate::visibility::ObjectSet;
+
+/// The impostors of one environment-map cell.
+struct CellMaps {
+    /// `(objects, sphere, memory bytes, largest texture side)` per impostor.
+    impostors: Vec<(Vec<u32>, Sphere, u64, u32)>,
+    aabb: Aabb,
+}
+
+/// Grid cells per environment-map cell, per axis.
+fn block(job: &Job, pv: &ProblemViews) -> [u32; 3] {
+    let g = &pv.grid;
+    let cell = g.cell_box([0; 3], [1; 3]);
+    [0, 1, 2].map(|a| {
+        let ext = cell.max[a] - cell.min[a];
+        if ext <= 0.0 {
+            g.counts[a]
+        } else {
+            ((job.env_map.cell_m / ext).round().max(1.0) as u32).min(g.counts[a])
+        }
+    })
+}
+
+/// Smallest distance between two boxes (0 when they meet).
+fn box_distance(a: &Aabb, b: &Aabb) -> f64 {
+    let gap = (a.min - b.max).max(b.min - a.max).max(DVec3::ZERO);
+    gap.length()
+}
+
+/// Splits the far objects of one cell into face layers.
+fn cell_maps(ctx: &Context, job: &Job, aabb: Aabb, visible: Option<&ObjectSet>) -> CellMaps {
+    let imodel = ImpostorModel::new(job);
+    let far = job.env_map.far_m;
+    let c = aabb.center();
+    let r_cell = aabb.half_diagonal();
+    // (face, depth, object) of every visible object entirely beyond `far`.
+    let mut per_face: [Vec<(f64, u32)>; 6] = Default::default();
+    for (o, s) in ctx.hierarchy.object_spheres.iter().enumerate() {
+        if visible.is_some_and(|v| !v.contains(o as u32)) {
+            continue;
+        }
+        let ob = &ctx.scene.objects[o];
+        if box_distance(&aabb, &Aabb::new(ob.min, ob.max)) < far {
+            continue;
+        }
+        let d = s.center - c;
+        if d.length_squared() == 0.0 {
+            continue;
+        }
+        let (face, _, _) = face_coords(d);
+        per_face[face as usize].push((d.length(), o as u32));
+    }
+    let mut impostors = Vec::new();
+    for (face, objs) in per_face.iter().enumerate() {
+        if objs.is_empty() {
+            continue;
+        }
+        let spheres = &ctx.hierarchy.object_spheres;
+        let zn = objs
+            .iter()
+            .map(|&(z, o)| z - spheres[o as usize].radius)
+            .fold(f64::INFINITY, f64::min)
+            .max(far * 0.5);
+        let zf = objs
+            .iter()
+            .map(|&(z, o)| z + spheres[o as usize].radius)
+            .fold(0.0, f64::max)
+            .max(zn * (1.0 + 1e-9));
+        let span = 1.0 / zn - 1.0 / zf;
+        let n =
+            ((r_cell * span / (2.0 * imodel.eps * imodel.theta)).ceil() as usize).clamp(1, 4096);
+        let mut layers: Vec<Vec<u32>> = vec![Vec::new(); n];
+        for &(z, o) in objs {
+            let t = ((1.0 / zn - 1.0 / z) / span).clamp(0.0, 1.0);
+            layers[((t * n as f64) as usize).min(n - 1)].push(o);
+        }
+        let axis = face / 2;
+        let sign = if face % 2 == 0 { 1.0 } else { -1.0 };
+        for mut objects in layers.into_iter().filter(|l| !l.is_empty()) {
+            objects.sort_unstable();
+            // Extent of the objects' boxes projected on the face plane.
+            let (mut u0, mut u1, mut v0, mut v1) = (f64::MAX, f64::MIN, f64::MAX, f64::MIN);
+            let mut sphere: Option<Sphere> = None;
+            for &o in &objects {
+                let ob = &ctx.scene.objects[o as usize];
+                for p in Aabb::new(ob.min, ob.max).corners() {
+                    let d = p - c;
+                    let depth = (d[axis] * sign).max(0.25 * d.length());
+                    let (a, b) = match axis {
+                        0 => (d.y, d.z),
+                        1 => (d.x, d.z),
+                        _ => (d.x, d.y),
+                    };
+                    let (u, v) = (a / depth, b / depth);
+                    u0 = u0.min(u);
+                    u1 = u1.max(u);
+                    v0 = v0.min(v);
+                    v1 = v1.max(v);
+                }
+                let s = spheres[o as usize];
+                sphere = Some(sphere.map_or(s, |acc| acc.merge(&s)));
+            }
+            let res_u = ((u1 - u0) / imodel.theta).ceil().max(4.0);
+            let res_v = ((v1 - v0) / imodel.theta).ceil().max(4.0);
+            let memory = (res_u * res_v * imodel.bytes_per_texel).ceil() as u64;
+            impostors.push((
+                objects,
+                sphere.expect("a layer has objects"),
+                memory,
+                res_u.max(res_v) as u32,
+            ));
+        }
+    }
+    CellMaps { impostors, aabb }
+}
+
+/// Cost of the objects in `cone` that are not in `skip`.
+fn cone_cost_without(
+    ctx: &Context,
+    costs: &RegionCosts,
+    cone: &crate::geom::Cone,
+    skip: &ObjectSet,
+) -> Cost {
+    let h = ctx.hierarchy;
+    let mut total = Cost::default();
+    let mut stack = vec![0u32];
+    while let Some(n) = stack.pop() {
+        let node = &h.nodes[n as usize];
+        if !cone.intersects_sphere(node.sphere.center, node.sphere.radius) {
+            continue;
+        }
+        match node.children {
+            Some([l, r]) => {
+                stack.push(r);
+                stack.push(l);
+            }
+            None => {
+                for &o in h.objects(n) {
+                    let s = &h.object_spheres[o as usize];
+                    if !skip.contains(o) && cone.intersects_sphere(s.center, s.radius) {
+                        total += costs.objects[o as usize];
+                    }
+                }
+            }
+        }
+    }
+    total
+}
+
+/// The environment-map placement: impostors, and per CPV its impostors'
+/// ids and its cost with them.
+pub struct EnvMapPlacement {
+    /// The impostors (ids are indices).
+    pub impostors: Vec<PlacedImpostor>,
+    /// Per CPV: impostor ids, ascending.
+    pub cpv_impostors: Vec<Vec<u32>>,
+    /// Per CPV: its cost with the environment maps of its cell.
+    pub cpv_cost: Vec<Cost>,
+}
+
+/// Places environment maps for every view cell of the job's view space.
+pub fn place(ctx: &Context, job: &Job, pv: &ProblemViews) -> EnvMapPlacement {
+    let k = block(job, pv);
+    let counts = pv.grid.counts;
+    let nb = [0, 1, 2].map(|a| counts[a].div_ceil(k[a]));
+    let blocks: Vec<[u32; 3]> = (0..nb[2])
+        .flat_map(|z| (0..nb[1]).flat_map(move |y| (0..nb[0]).map(move |x| [x, y, z])))
+        .collect();
+    let maps: Vec<CellMaps> = blocks
+        .par_iter()
+        .map(|b| {
+            let lo = [0, 1, 2].map(|a| b[a] * k[a]);
+            let hi = [0, 1, 2].map(|a| ((b[a] + 1) * k[a]).min(counts[a]));
+            let aabb = pv.grid.cell_box(lo, hi);
+            let visible = ctx.visibility.and_then(|v| v.region(lo, hi));
+            cell_maps(ctx, job, aabb, visible.as_deref())
+        })
+        .collect();
+    // Impostor ids in block order.
+    let mut impostors = Vec::new();
+    let mut first = Vec::with_capacity(maps.len() + 1);
+    for m in &maps {
+        first.push(impostors.len() as u32);
+        for (objects, sphere, memory, res) in &m.impostors {
+            let d = m.aabb.distance_to_point(sphere.center);
+            let cost = ctx.model.impostor(1, sphere.radius, d);
+            impostors.push(PlacedImpostor {
+                id: impostors.len() as u32,
+                node: u32::MAX,
+                objects: objects.clone(),
+                sphere: SphereJson {
+                    center: sphere.center.to_array(),
+                    radius: sphere.radius,
+                },
+                view_cell: ViewCellJson::Box {
+                    min: m.aabb.min.to_array(),
+                    max: m.aabb.max.to_array(),
+                },
+                layers: 1,
+                resolution: *res,
+                memory_bytes: *memory,
+                time_ms: cost.cpu + cost.gpu,
+            });
+        }
+    }
+    first.push(impostors.len() as u32);
+    let block_of = |cell: [u32; 3]| {
+        let b = [0, 1, 2].map(|a| cell[a] / k[a]);
+        ((b[2] * nb[1] + b[1]) * nb[0] + b[0]) as usize
+    };
+    let n_obj = ctx.scene.objects.len();
+    let (cpv_impostors, cpv_cost): (Vec<Vec<u32>>, Vec<Cost>) = pv
+        .cpvs
+        .par_iter()
+        .map(|cpv| {
+            let b = block_of(pv.kd[cpv.kd as usize].lo);
+            let ids: Vec<u32> = (first[b]..first[b + 1]).collect();
+            let mut skip = ObjectSet::new(n_obj);
+            for &i in &ids {
+                for &o in &impostors[i as usize].objects {
+                    skip.insert(o);
+                }
+            }
+            let kd = &pv.kd[cpv.kd as usize];
+            let visible = ctx.visibility.and_then(|v| v.region(kd.lo, kd.hi));
+            let costs = RegionCosts::new(ctx, &cpv.region, visible.as_deref());
+            let cone = enclosing_cone(&cpv.region, &cpv.vdi, ctx.half_diagonal);
+            let mut cost = cone_cost_without(ctx, &costs, &cone, &skip);
+            for &i in &ids {
+                let s = &impostors[i as usize].sphere;
+                let center = DVec3::from_array(s.center);
+                if cone.intersects_sphere(center, s.radius) {
+                    cost += ctx
+                        .model
+                        .impostor(1, s.radius, cpv.region.distance_to_point(center));
+                }
+            }
+            (ids, cost)
+        })
+        .unzip();
+    EnvMapPlacement {
+        impostors,
+        cpv_impostors,
+        cpv_cost,
+    }
+}
