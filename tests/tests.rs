@@ -5,6 +5,7 @@ mod bad_input;
 mod bake;
 mod cli;
 mod real_scenes;
+mod report;
 mod schemas;
 mod util;
 mod visibility;

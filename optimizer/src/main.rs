@@ -10,7 +10,7 @@ use optimizer::job::{Job, MemoryParams, Method, VisibilityMode};
 use optimizer::pipeline::{Control, PlaceOptions, place_input};
 use optimizer::placement::Placement;
 use optimizer::visibility::pvs::{PvsCell, PvsFile};
-use optimizer::{Error, Result, bake, citygen, geometry, gltf_load, image_eval, schema};
+use optimizer::{Error, Result, bake, citygen, geometry, gltf_load, image_eval, report, schema};
 
 /// Automatic impostor placement for guaranteed frame rates and low memory.
 #[derive(Parser)]
@@ -97,6 +97,41 @@ enum Command {
         /// Visibility check: culled objects in the view probed per view.
         #[arg(long, default_value_t = 16)]
         check_objects: u32,
+    },
+    /// Compare placement methods on one scene: every method × knob value is
+    /// placed and evaluated; writes DIR/report.html (charts of memory against
+    /// frame time, the guarantee, speed against accuracy, walkthroughs),
+    /// report.json and CSV files.
+    Report {
+        /// Scene: .glb, .gltf or a JSON scene summary.
+        scene: PathBuf,
+        /// The base job JSON.
+        #[arg(long)]
+        job: PathBuf,
+        /// Methods to compare, comma-separated (default: all of shafts, boxes,
+        /// both, per-cell, env-map, shafts+prune).
+        #[arg(long, value_delimiter = ',')]
+        methods: Vec<String>,
+        /// A knob and its values, e.g. `target_frame_time_ms=10,15,20` or
+        /// `problem_views.cell_size=46,23,11.5` (repeatable).
+        #[arg(long)]
+        sweep: Vec<String>,
+        /// Also perturb the target (±1 %, ±5 %), shift the grid by half a cell
+        /// and shuffle the objects, and report each method's spread.
+        #[arg(long)]
+        stability: bool,
+        /// Views per evaluation.
+        #[arg(long, default_value_t = 4000)]
+        views: u64,
+        /// Precomputed PVS file (for `"visibility": "precomputed"`).
+        #[arg(long)]
+        pvs: Option<PathBuf>,
+        /// Worker threads (default: all cores).
+        #[arg(long)]
+        threads: Option<usize>,
+        /// Output directory.
+        #[arg(short, long)]
+        out: PathBuf,
     },
     /// Compute the potentially visible set of every view-space cell of a job
     /// (its `visibility` mode: conservative or sampled) and write it as a PVS
@@ -484,6 +519,79 @@ fn run(cli: Cli) -> Result<ExitCode> {
                 start.elapsed().as_secs_f64()
             );
             Ok(ExitCode::SUCCESS)
+        }
+        Command::Report {
+            scene,
+            job,
+            methods,
+            sweep,
+            stability,
+            views,
+            pvs,
+            threads,
+            out,
+        } => {
+            set_threads(threads)?;
+            let job_path = job.display().to_string();
+            let text = std::fs::read(&job).map_err(|e| Error::io(&job, e))?;
+            let parsed = Job::from_json(&text, &job_path)?;
+            let job_value: serde_json::Value = serde_json::from_slice(&text)
+                .map_err(|e| Error::bad(&job_path, format!("invalid job JSON: {e}")))?;
+            let methods = if methods.is_empty() {
+                Method::ALL.to_vec()
+            } else {
+                methods
+                    .iter()
+                    .map(|m| parse_method(m.trim()))
+                    .collect::<Result<Vec<_>>>()?
+            };
+            let sweeps = sweep
+                .iter()
+                .map(|s| report::run::parse_sweep(s))
+                .collect::<Result<Vec<_>>>()?;
+            let input = load_input(&scene, pvs.as_deref(), &parsed, &job_path, false)?;
+            std::fs::create_dir_all(&out).map_err(|e| Error::io(&out, e))?;
+            let name = scene
+                .file_name()
+                .map(|n| n.to_string_lossy().into_owned())
+                .unwrap_or_default();
+            let r = report::run::run(
+                &name,
+                &input,
+                &job_value,
+                &report::run::ReportOptions {
+                    methods,
+                    sweeps,
+                    stability,
+                    views,
+                    progress: true,
+                },
+            )?;
+            write_output(Some(&out.join("report.json")), &json(&r)?)?;
+            write_output(
+                Some(&out.join("report.html")),
+                report::render::render_html(&r).as_bytes(),
+            )?;
+            for (file, text) in report::render::csv_files(&r) {
+                write_output(Some(&out.join(file)), text.as_bytes())?;
+            }
+            let failed = r.runs.iter().filter(|x| x.status != "ok").count();
+            let broken = r
+                .runs
+                .iter()
+                .filter(|x| x.eval.as_ref().is_some_and(|e| e.violations_in_solved > 0))
+                .count();
+            eprintln!(
+                "{} runs ({failed} failed, {broken} with a broken guarantee), {} walkthroughs: {}",
+                r.runs.len(),
+                r.walkthroughs.len(),
+                out.join("report.html").display()
+            );
+            Ok(if broken > 0 {
+                ExitCode::from(4)
+            } else {
+                ExitCode::SUCCESS
+            })
         }
         Command::Pvs {
             scene,

@@ -1,0 +1,173 @@
+//! `impostor report` and the placement methods end to end: every method on
+//! a small scene, the stability mode, the failure scene, bad arguments.
+
+use crate::util::*;
+
+fn small_job() -> std::path::PathBuf {
+    root().join("fixtures/jobs/city-small.json")
+}
+
+#[test]
+fn a_report_compares_methods_over_a_target_sweep() {
+    let dir = tmp("report");
+    let city = city("0.1");
+    let out = dir.join("r");
+    let o = run(&[
+        "report",
+        s(&city),
+        "--job",
+        s(&small_job()),
+        "--methods",
+        "shafts,boxes,per-cell,env-map,shafts+prune",
+        "--sweep",
+        "target_frame_time_ms=5.5,6,7",
+        "--views",
+        "800",
+        "-o",
+        s(&out),
+    ]);
+    assert_eq!(code(&o), 0, "{}", stderr(&o));
+    let r = read_json(&out.join("report.json"));
+    let runs = r["runs"].as_array().unwrap();
+    assert_eq!(runs.len(), 5 * 4, "base + 3 targets per method");
+    for run in runs {
+        assert_eq!(run["status"], "ok", "{run}");
+        assert_eq!(run["eval"]["violations_in_solved"], 0, "{run}");
+    }
+    // Memory falls as the target rises, for every method with a guarantee.
+    for m in ["shafts", "boxes", "per-cell", "shafts+prune"] {
+        let mem: Vec<u64> = runs
+            .iter()
+            .filter(|x| x["method"] == m && x["knob"] == "target_frame_time_ms")
+            .map(|x| x["memory_bytes"].as_u64().unwrap())
+            .collect();
+        assert_eq!(mem.len(), 3);
+        assert!(mem[0] >= mem[1] && mem[1] >= mem[2], "{m}: {mem:?}");
+        assert!(mem[0] > mem[2], "{m}: {mem:?}");
+    }
+    // One walkthrough per (method, swept target).
+    assert_eq!(r["walkthroughs"].as_array().unwrap().len(), 5 * 3);
+    let html = std::fs::read_to_string(out.join("report.html")).unwrap();
+    assert!(html.contains("<svg"), "charts are inline SVG");
+    assert!(html.contains("env-map") && html.contains("per-cell"));
+    let csv = std::fs::read_to_string(out.join("runs.csv")).unwrap();
+    assert_eq!(csv.lines().count(), 1 + runs.len());
+}
+
+#[test]
+fn the_stability_mode_reports_each_methods_spread() {
+    let dir = tmp("stability");
+    let city = city("0.1");
+    let out = dir.join("r");
+    let o = run(&[
+        "report",
+        s(&city),
+        "--job",
+        s(&small_job()),
+        "--methods",
+        "shafts,boxes",
+        "--stability",
+        "--views",
+        "400",
+        "-o",
+        s(&out),
+    ]);
+    assert_eq!(code(&o), 0, "{}", stderr(&o));
+    let r = read_json(&out.join("report.json"));
+    let st = r["stability"]["methods"].as_array().unwrap();
+    assert_eq!(st.len(), 2);
+    for m in st {
+        let settings = m["settings"].as_array().unwrap();
+        assert_eq!(settings.len(), 8, "{m}");
+        assert!(settings.iter().all(|x| x["status"] == "ok"), "{m}");
+        let mem = &m["memory"];
+        assert!(mem["min"].as_f64().unwrap() <= mem["mean"].as_f64().unwrap());
+        assert!(mem["mean"].as_f64().unwrap() <= mem["max"].as_f64().unwrap());
+        // Shuffling objects changes the hierarchy, yet the result stays in
+        // the same range as the base.
+        let base = settings[0]["memory_bytes"].as_f64().unwrap();
+        for x in settings
+            .iter()
+            .filter(|x| x["label"].as_str().unwrap().contains("shuffled"))
+        {
+            let v = x["memory_bytes"].as_f64().unwrap();
+            assert!(
+                v < 10.0 * base + 1e6 && v > base / 10.0 - 1e6,
+                "{x} vs {base}"
+            );
+        }
+    }
+}
+
+#[test]
+fn the_failure_scene_leaves_problem_views_unsolved_for_every_method() {
+    let dir = tmp("failure");
+    let scene = dir.join("failure.glb");
+    let o = run(&["gen-city", "--failure", "-o", s(&scene)]);
+    assert_eq!(code(&o), 0, "{}", stderr(&o));
+    let job = root().join("fixtures/jobs/failure.json");
+    for m in [
+        "shafts",
+        "boxes",
+        "both",
+        "per-cell",
+        "env-map",
+        "shafts+prune",
+    ] {
+        let p = dir.join(format!("{m}.json"));
+        let o = place(&scene, &job, &p, &["--method", m]);
+        assert_eq!(code(&o), 3, "{m}: {}", stderr(&o));
+        let placement = read_json(&p);
+        let unsolved = placement["summary"]["unsolved_cpvs"].as_u64().unwrap();
+        assert!(unsolved > 0, "{m}");
+        // Unsolved problem views are listed with their residual time.
+        assert!(
+            placement["cpvs"]
+                .as_array()
+                .unwrap()
+                .iter()
+                .any(|c| c["solved"] == false && c["time_ms_final"].as_f64().unwrap() > 5.0)
+        );
+        let e = dir.join(format!("{m}.eval.json"));
+        let o = evaluate(&scene, &job, &p, &e, 1000);
+        assert_eq!(code(&o), 0, "{m}: {}", stderr(&o));
+        let eval = read_json(&e);
+        assert_eq!(eval["violations_in_solved"], 0, "{m}: {eval}");
+        assert!(
+            eval["violations"].as_u64().unwrap() > 0,
+            "{m}: the failure must show"
+        );
+    }
+}
+
+#[test]
+fn bad_report_arguments_are_named() {
+    let dir = tmp("report-bad");
+    let city = city("0.1");
+    let out = dir.join("r");
+    let job = small_job();
+    for (args, needle) in [
+        (vec!["--methods", "shafts,magic"], "magic"),
+        (vec!["--sweep", "lod.ratio=0.5"], "lod.ratio"),
+        (vec!["--sweep", "problem_views.nope=1"], "nope"),
+        (
+            vec!["--sweep", "target_frame_time_ms=-3"],
+            "target_frame_time_ms",
+        ),
+        (vec!["--sweep", "target_frame_time_ms"], "knob=v1"),
+    ] {
+        let mut a = vec!["report", s(&city), "--job", s(&job), "-o", s(&out)];
+        a.extend(args);
+        let o = run(&a);
+        assert_eq!(code(&o), 2, "{a:?}: {}", stderr(&o));
+        assert!(stderr(&o).contains(needle), "{a:?}: {}", stderr(&o));
+    }
+    let o = place(
+        &city,
+        &small_job(),
+        &dir.join("p.json"),
+        &["--method", "best"],
+    );
+    assert_eq!(code(&o), 2);
+    assert!(stderr(&o).contains("shafts+prune"), "{}", stderr(&o));
+}
