@@ -273,3 +273,93 @@ async fn full_queue_and_cancellation() {
     let (s, _) = get_json(addr, &format!("/v1/jobs/{id}/placement")).await;
     assert_eq!(s, 409);
 }
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn visibility_jobs_run_and_missing_inputs_are_refused() {
+    let mut cfg = Config::new(temp_dir("vis"));
+    cfg.eval_views = 300;
+    let addr = start(cfg).await;
+    let glb = city(0.1);
+    let job: Vec<u8> = std::fs::read(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../fixtures/jobs/city-small-visibility.json"
+    ))
+    .unwrap();
+    // The CLI's placement of the same job.
+    let parsed = optimizer::job::Job::from_json(&job, "job").unwrap();
+    let input = optimizer::input::SceneInput::new(
+        optimizer::gltf_load::load_scene_bytes(&glb, "city").unwrap(),
+        Some(optimizer::geometry::load_geometry_bytes(&glb, "city").unwrap()),
+        None,
+        &parsed,
+    )
+    .unwrap();
+    let expected = optimizer::to_json_bytes(
+        &optimizer::pipeline::place_input(
+            &input,
+            &parsed,
+            &Default::default(),
+            &Default::default(),
+        )
+        .unwrap()
+        .placement,
+    )
+    .unwrap();
+    let (ct, body) = multipart(&[("scene", &glb), ("job", &job)]);
+    let (s, b) = request(addr, "POST", "/v1/jobs", Some(&ct), &body).await;
+    assert_eq!(s, 202, "{}", String::from_utf8_lossy(&b));
+    let id = serde_json::from_slice::<Value>(&b).unwrap()["id"]
+        .as_i64()
+        .unwrap();
+    let v = wait_final(addr, id, Duration::from_secs(120)).await;
+    assert_eq!(v["state"], "succeeded", "{v}");
+    let (s, placement) = request(addr, "GET", &format!("/v1/jobs/{id}/placement"), None, b"").await;
+    assert_eq!(s, 200);
+    assert_eq!(placement, expected, "the service places like the library");
+    let (_, eval) = get_json(addr, &format!("/v1/jobs/{id}/evaluation")).await;
+    assert_eq!(eval["visibility"]["mode"], "conservative", "{eval}");
+    assert_eq!(eval["visibility"]["missed_objects"], 0, "{eval}");
+
+    // Conservative visibility needs geometry: a summary is refused up front.
+    let summary = serde_json::to_value(
+        optimizer::gltf_load::load_scene_bytes(&glb, "city")
+            .unwrap()
+            .summary(),
+    )
+    .unwrap();
+    let body = json!({"scene": summary, "job": serde_json::from_slice::<Value>(&job).unwrap()});
+    let (s, b) = submit_json(addr, &body).await;
+    assert_eq!(s, 422, "{}", String::from_utf8_lossy(&b));
+    assert!(String::from_utf8_lossy(&b).contains("geometry"));
+
+    // Precomputed visibility: needs a PVS, and the PVS must fit the scene.
+    let mut pre: Value = serde_json::from_slice(&job).unwrap();
+    pre["visibility"] = json!("precomputed");
+    let pre = serde_json::to_vec(&pre).unwrap();
+    let (ct, body) = multipart(&[("scene", &glb), ("job", &pre)]);
+    let (s, b) = request(addr, "POST", "/v1/jobs", Some(&ct), &body).await;
+    assert_eq!(s, 422);
+    assert!(String::from_utf8_lossy(&b).contains("pvs"));
+    let wrong = br#"{"objects": 2, "cells": []}"#;
+    let (ct, body) = multipart(&[("scene", &glb), ("job", &pre), ("pvs", wrong)]);
+    let (s, b) = request(addr, "POST", "/v1/jobs", Some(&ct), &body).await;
+    assert_eq!(s, 422);
+    assert!(String::from_utf8_lossy(&b).contains("does not match"));
+    // A PVS where every object is visible everywhere: accepted and placed.
+    let objects = summary["objects"].as_array().unwrap().len();
+    let all: Vec<u32> = (0..objects as u32).collect();
+    let pvs = json!({"objects": objects, "cells": [{"min": [-1, 0, -1], "max": [500, 5, 400], "visible": all}]});
+    let (ct, body) = multipart(&[
+        ("scene", &glb),
+        ("job", &pre),
+        ("pvs", pvs.to_string().as_bytes()),
+    ]);
+    let (s, b) = request(addr, "POST", "/v1/jobs", Some(&ct), &body).await;
+    assert_eq!(s, 202, "{}", String::from_utf8_lossy(&b));
+    let id = serde_json::from_slice::<Value>(&b).unwrap()["id"]
+        .as_i64()
+        .unwrap();
+    let v = wait_final(addr, id, Duration::from_secs(120)).await;
+    assert_eq!(v["state"], "succeeded", "{v}");
+    assert!(v["summary"]["cpvs"].as_u64().unwrap() > 0, "{v}");
+}
