@@ -159,21 +159,21 @@ impl AxisGrid {
     }
 }
 
-/// The widest angle between `axis` and any of the unit directions `dirs`.
-fn widest_angle(dirs: &[DVec3], axis: DVec3) -> f64 {
+/// Half-angle of the cone around `axis` containing the spheres seen in
+/// unit directions `dirs` with angular radii `radii`.
+fn cone_half_angle(dirs: &[DVec3], radii: &[f64], axis: DVec3) -> f64 {
     dirs.iter()
-        .map(|w| w.dot(axis).clamp(-1.0, 1.0).acos())
+        .zip(radii)
+        .map(|(w, r)| w.dot(axis).clamp(-1.0, 1.0).acos() + r)
         .fold(0.0, f64::max)
 }
 
-/// A narrow cone around unit directions `dirs`, starting from `axis`: a few
-/// steps of moving the axis towards the farthest direction (Bădoiu and
-/// Clarkson's core-set iteration on the sphere); returns the best axis seen
-/// and its widest angle, never worse than `axis`'s own.
-fn fit_cone(dirs: &[DVec3], axis: DVec3) -> (DVec3, f64) {
-    let mut best = (axis, widest_angle(dirs, axis));
+/// An axis for a narrow cone around unit directions `dirs`, from `axis`:
+/// a few steps of moving it towards the farthest direction (Bădoiu and
+/// Clarkson's core-set iteration on the sphere).
+fn fit_cone(dirs: &[DVec3], axis: DVec3) -> DVec3 {
     let mut a = axis;
-    for k in 1..=16 {
+    for k in 1..=8 {
         let Some(far) = dirs
             .iter()
             .copied()
@@ -186,12 +186,8 @@ fn fit_cone(dirs: &[DVec3], axis: DVec3) -> (DVec3, f64) {
             break;
         }
         a = next;
-        let w = widest_angle(dirs, a);
-        if w < best.1 {
-            best = (a, w);
-        }
     }
-    best
+    a
 }
 
 /// A candidate key, sortable and deduplicated per node.
@@ -408,6 +404,26 @@ pub fn generate(ctx: &Context, job: &Job, pv: &ProblemViews) -> Candidates {
                 }
                 let start = served.len() as u32;
                 served.extend(tuples[i..e].iter().map(|t| t.1));
+                // Shafts: the served cells' directions and angular radii
+                // from the cluster, and an axis fitted to the whole block
+                // (its candidates serve prefixes of it).
+                let (dirs, radii, block_axis) = match tuples[i].0 {
+                    Key::Shaft { m, j, .. } => {
+                        let (dirs, radii): (Vec<DVec3>, Vec<f64>) = tuples[i..e]
+                            .iter()
+                            .map(|&(_, g)| {
+                                let b = pv.kd[groups[g as usize].kd as usize].aabb;
+                                let v = b.center() - sphere.center;
+                                let l = v.length();
+                                let rho = (b.half_diagonal() / l).min(1.0).asin();
+                                (v / l, rho)
+                            })
+                            .unzip();
+                        let axis = fit_cone(&dirs, grid.axis(m, j));
+                        (dirs, radii, axis)
+                    }
+                    Key::Box { .. } => (Vec::new(), Vec::new(), DVec3::ZERO),
+                };
                 // One candidate per distinct key of the block, serving the
                 // block's prefix up to the end of its key.
                 let mut s = i;
@@ -432,14 +448,14 @@ pub fn generate(ctx: &Context, job: &Job, pv: &ProblemViews) -> Candidates {
                             // Likewise it narrows, around an axis re-aimed
                             // at the served cells, to the widest angle of
                             // their corners.
-                            let dirs: Vec<DVec3> = tuples[i..t]
-                                .iter()
-                                .flat_map(|&(_, g)| {
-                                    pv.kd[groups[g as usize].kd as usize].aabb.corners()
+                            let n_served = t - i;
+                            let (axis, widest) = [grid.axis(m, j), block_axis]
+                                .into_iter()
+                                .map(|a| {
+                                    (a, cone_half_angle(&dirs[..n_served], &radii[..n_served], a))
                                 })
-                                .map(|p| (p - sphere.center).normalize())
-                                .collect();
-                            let (axis, widest) = fit_cone(&dirs, grid.axis(m, j));
+                                .min_by(|x, y| x.1.total_cmp(&y.1))
+                                .expect("two axes");
                             let alpha = alpha.min(widest * (1.0 + 1e-9) + 1e-12);
                             imodel.shaft(&sphere, alpha, d).map(|spec| Candidate {
                                 node: n,
