@@ -108,3 +108,202 @@ pub fn box_geometry(scene: &Scene) -> crate::geometry::SceneGeometry {
         objects: scene.objects.len(),
     }
 }
+
+/// A synthetic comparison report (no runs behind it) for rendering tests
+/// and samples: methods `shafts`, `boxes` and `env-map` over five target
+/// frame times (5, 10, 20, 40, 80 ms), base runs at 20 ms, a
+/// `problem_views.cell_size` sweep (2, 4, 8) for `shafts` and `boxes`,
+/// walkthroughs for `shafts` (10 and 20 ms) and `boxes` (20 ms), and a
+/// stability block. `env-map` at 5 ms failed (its error holds a comma),
+/// `boxes` at 80 ms needed no impostors (0 bytes), `boxes` at 10 ms has 2
+/// views over the target in solved problem views, and the job's text holds
+/// markup (`</pre><script>…`) to check escaping.
+pub fn sample_report() -> crate::report::Report {
+    use crate::placement::StageTime;
+    use crate::report::{
+        EvalSummary, Machine, MethodStability, Perturbed, Report, Run, SceneInfo, Spread,
+        Stability, Sweep, Walkthrough,
+    };
+    let targets = [5.0, 10.0, 20.0, 40.0, 80.0];
+    let memory: [(&str, [u64; 5]); 3] = [
+        (
+            "shafts",
+            [12_000_000, 6_000_000, 3_000_000, 1_500_000, 700_000],
+        ),
+        ("boxes", [30_000_000, 15_000_000, 8_000_000, 4_000_000, 0]),
+        ("env-map", [0, 4_000_000, 3_500_000, 3_000_000, 2_500_000]),
+    ];
+    let run = |method: &str, knob: Option<&str>, value: Option<f64>, t: f64, mem: u64, s: f64| {
+        let over = u64::from(method == "boxes" && t == 10.0 && knob.is_some());
+        // Per method, how close the evaluation comes to the target.
+        let k = match method {
+            "shafts" => 0.97,
+            "boxes" => 0.9,
+            _ => 0.8,
+        };
+        Run {
+            method: method.into(),
+            knob: knob.map(String::from),
+            value,
+            target_frame_time_ms: t,
+            status: "ok".into(),
+            error: None,
+            cpvs: 120,
+            candidates: 900,
+            impostors: mem / 100_000,
+            memory_bytes: mem,
+            unsolved_cpvs: 0,
+            seconds: s,
+            stage_seconds: vec![StageTime {
+                stage: "greedy".into(),
+                seconds: s / 2.0,
+            }],
+            eval: Some(EvalSummary {
+                views: 1000,
+                max_ms: t * if over == 1 { 1.08 } else { k },
+                p99_ms: t * k * 0.85,
+                p50_ms: t * k * 0.5,
+                mean_ms: t * k * 0.55,
+                violations: over * 3,
+                violations_in_solved: over * 2,
+                max_ms_in_solved: t * if over == 1 { 1.08 } else { k * 0.97 },
+            }),
+        }
+    };
+    let mut runs = Vec::new();
+    for (method, mem) in memory {
+        for (i, t) in targets.iter().enumerate() {
+            let mut r = run(
+                method,
+                Some("target_frame_time_ms"),
+                Some(*t),
+                *t,
+                mem[i],
+                10.0 / t,
+            );
+            if method == "env-map" && i == 0 {
+                r.status = "failed".into();
+                r.error = Some("placement failed: 3 CPVs unsolvable, budget exceeded".into());
+                r.eval = None;
+            }
+            runs.push(r);
+        }
+        runs.push(run(method, None, None, 20.0, mem[2], 0.5));
+    }
+    let cells = [
+        (
+            "shafts",
+            [(9.0, 2_500_000), (4.0, 3_000_000), (2.0, 4_000_000)],
+        ),
+        (
+            "boxes",
+            [(5.0, 7_000_000), (3.0, 8_000_000), (1.5, 9_500_000)],
+        ),
+    ];
+    for (method, pts) in cells {
+        for (value, (s, mem)) in [2.0, 4.0, 8.0].into_iter().zip(pts) {
+            runs.push(run(
+                method,
+                Some("problem_views.cell_size"),
+                Some(value),
+                20.0,
+                mem,
+                s,
+            ));
+        }
+    }
+    let walk = |method: &str, t: f64, bump: bool| Walkthrough {
+        method: method.into(),
+        target_frame_time_ms: t,
+        frame_ms: (0..60)
+            .map(|i| {
+                let ms = t * (0.6 + 0.3 * (f64::from(i) * 0.2).sin());
+                if bump && i == 30 { t * 1.05 } else { ms }
+            })
+            .collect(),
+    };
+    let spread = |v: &[f64]| {
+        let n = v.len() as f64;
+        let mean = v.iter().sum::<f64>() / n;
+        let var = v.iter().map(|x| (x - mean) * (x - mean)).sum::<f64>() / n;
+        Spread {
+            min: v.iter().copied().fold(f64::INFINITY, f64::min),
+            max: v.iter().copied().fold(f64::NEG_INFINITY, f64::max),
+            mean,
+            relative_std: if mean > 0.0 { var.sqrt() / mean } else { 0.0 },
+        }
+    };
+    let stable = |method: &str, mem: [u64; 4]| {
+        let labels = [
+            "base",
+            "target +5%",
+            "grid shifted 0.5 cell",
+            "objects shuffled (seed 2)",
+        ];
+        let settings: Vec<Perturbed> = labels
+            .iter()
+            .zip(mem)
+            .map(|(l, m)| Perturbed {
+                label: (*l).into(),
+                status: "ok".into(),
+                memory_bytes: m,
+                impostors: m / 100_000,
+                unsolved_cpvs: 0,
+                max_ms: 19.0,
+            })
+            .collect();
+        let mems: Vec<f64> = mem.iter().map(|m| *m as f64).collect();
+        let imps: Vec<f64> = mem.iter().map(|m| (m / 100_000) as f64).collect();
+        MethodStability {
+            method: method.into(),
+            settings,
+            memory: spread(&mems),
+            impostors: spread(&imps),
+        }
+    };
+    Report {
+        version: env!("CARGO_PKG_VERSION").into(),
+        created: "2025-01-01T00:00:00Z".into(),
+        machine: Machine {
+            os: "linux x86_64".into(),
+            threads: 2,
+            cpu: "Example CPU".into(),
+            memory_bytes: 24_000_000_000,
+        },
+        scene: SceneInfo {
+            name: "city.glb".into(),
+            objects: 1200,
+            triangles: 2_400_000,
+            min: [0.0, 0.0, 0.0],
+            max: [400.0, 60.0, 400.0],
+        },
+        job: serde_json::json!({
+            "target_frame_time_ms": 20.0,
+            "problem_views": { "cell_size": 4.0 },
+            "note": "</pre><script>alert('x')</script>",
+        }),
+        methods: vec!["shafts".into(), "boxes".into(), "env-map".into()],
+        sweeps: vec![
+            Sweep {
+                knob: "target_frame_time_ms".into(),
+                values: targets.to_vec(),
+            },
+            Sweep {
+                knob: "problem_views.cell_size".into(),
+                values: vec![2.0, 4.0, 8.0],
+            },
+        ],
+        runs,
+        walkthroughs: vec![
+            walk("shafts", 10.0, false),
+            walk("shafts", 20.0, false),
+            walk("boxes", 20.0, true),
+        ],
+        stability: Some(Stability {
+            methods: vec![
+                stable("shafts", [3_000_000, 3_100_000, 2_900_000, 3_050_000]),
+                stable("boxes", [8_000_000, 8_600_000, 7_200_000, 8_100_000]),
+            ],
+        }),
+    }
+}
