@@ -32,7 +32,7 @@ use optimizer::job::Job;
 
 pub mod client;
 pub mod openapi;
-use optimizer::pipeline::{Control, PlaceOptions, place_input};
+use optimizer::pipeline::{Control, PlaceOptions, place_shared};
 
 /// Version of the optimizer library this service is built against.
 pub const OPTIMIZER_VERSION: &str = optimizer::VERSION;
@@ -344,12 +344,25 @@ impl AppState {
             cancel: Some(cancel),
             on_progress: Some(&progress),
         };
-        let out = place_input(&input, &job, &PlaceOptions::default(), &ctl)?;
+        let hierarchy = optimizer::hierarchy::Hierarchy::build(&input.scene);
+        let visibility = optimizer::visibility::Visibility::new(
+            &job,
+            &input.scene,
+            &hierarchy,
+            input.visibility_inputs(&job),
+        )?;
+        let shared = optimizer::evaluate::Shared {
+            hierarchy: &hierarchy,
+            visibility: visibility.as_ref(),
+        };
+        let start = std::time::Instant::now();
+        let out = place_shared(&input, &job, &PlaceOptions::default(), &ctl, &shared)?;
+        let place_seconds = start.elapsed().as_secs_f64();
         let placement = optimizer::to_json_bytes(&out.placement)?;
         write_atomic(&dir.join("placement.json"), &placement)
             .map_err(io(dir.join("placement.json")))?;
         progress("evaluate", 0.98);
-        let eval = optimizer::evaluate::evaluate_input(
+        let eval = optimizer::evaluate::evaluate_shared(
             &input,
             &job,
             &out.placement,
@@ -359,7 +372,23 @@ impl AppState {
                 ..optimizer::evaluate::EvalOptions::default()
             },
             "placement",
+            &shared,
         )?;
+        // A one-run report: the job's placement, evaluation and walkthrough.
+        let frames = optimizer::evaluate::frame_times(
+            &input,
+            &job,
+            &out.placement,
+            &optimizer::evaluate::walkthrough_views(&job),
+            "placement",
+            &shared,
+        )?;
+        let report = one_run_report(&input, &job_bytes, &job, &out, &eval, place_seconds, frames);
+        write_atomic(
+            &dir.join("report.html"),
+            optimizer::report::render::render_html(&report).as_bytes(),
+        )
+        .map_err(io(dir.join("report.html")))?;
         write_atomic(
             &dir.join("evaluation.json"),
             &optimizer::to_json_bytes(&eval)?,
@@ -539,6 +568,68 @@ impl AppState {
             "summary": summary.and_then(|s| serde_json::from_str::<Value>(&s).ok()),
             "error": error,
         }))
+    }
+}
+
+/// The report of one job: its run, its evaluation and its walkthrough.
+fn one_run_report(
+    input: &optimizer::input::SceneInput,
+    job_bytes: &[u8],
+    job: &Job,
+    out: &optimizer::pipeline::PlaceOutput,
+    eval: &optimizer::evaluate::Evaluation,
+    seconds: f64,
+    frames: Vec<f64>,
+) -> optimizer::report::Report {
+    use optimizer::report::{EvalSummary, Report, Run, SceneInfo, Walkthrough};
+    let method = job.method().name().to_string();
+    let s = &out.placement.summary;
+    let (lo, hi) = input.scene.bounds();
+    Report {
+        version: optimizer::VERSION.into(),
+        created: optimizer::report::run::now_rfc3339(),
+        machine: optimizer::report::run::machine(),
+        scene: SceneInfo {
+            name: "scene".into(),
+            objects: input.scene.objects.len() as u64,
+            triangles: input.scene.total_triangles(),
+            min: lo.to_array(),
+            max: hi.to_array(),
+        },
+        job: serde_json::from_slice(job_bytes).unwrap_or(Value::Null),
+        methods: vec![method.clone()],
+        sweeps: Vec::new(),
+        runs: vec![Run {
+            method: method.clone(),
+            knob: None,
+            value: None,
+            target_frame_time_ms: job.target_frame_time_ms,
+            status: "ok".into(),
+            error: None,
+            cpvs: s.cpvs,
+            candidates: s.candidates,
+            impostors: s.impostors,
+            memory_bytes: s.memory_bytes,
+            unsolved_cpvs: s.unsolved_cpvs,
+            seconds,
+            stage_seconds: out.stats.seconds.clone(),
+            eval: Some(EvalSummary {
+                views: eval.views,
+                max_ms: eval.max_ms,
+                p99_ms: eval.p99_ms,
+                p50_ms: eval.p50_ms,
+                mean_ms: eval.mean_ms,
+                violations: eval.violations,
+                violations_in_solved: eval.violations_in_solved,
+                max_ms_in_solved: eval.max_ms_in_solved,
+            }),
+        }],
+        walkthroughs: vec![Walkthrough {
+            method,
+            target_frame_time_ms: job.target_frame_time_ms,
+            frame_ms: frames,
+        }],
+        stability: None,
     }
 }
 
@@ -744,6 +835,13 @@ async fn impostors(
     result_file(&st, id, "impostors.glb", "model/gltf-binary").await
 }
 
+async fn report_page(
+    State(st): State<AppState>,
+    UrlPath(id): UrlPath<i64>,
+) -> Result<Response, ApiError> {
+    result_file(&st, id, "report.html", "text/html; charset=utf-8").await
+}
+
 async fn delete(
     State(st): State<AppState>,
     UrlPath(id): UrlPath<i64>,
@@ -792,6 +890,7 @@ pub fn app(state: AppState) -> Router {
         .route("/v1/jobs/{id}/placement", get(placement))
         .route("/v1/jobs/{id}/evaluation", get(evaluation))
         .route("/v1/jobs/{id}/impostors.glb", get(impostors))
+        .route("/v1/jobs/{id}/report", get(report_page))
         .layer(DefaultBodyLimit::max(limit))
         .layer(tower_http::timeout::TimeoutLayer::with_status_code(
             StatusCode::REQUEST_TIMEOUT,

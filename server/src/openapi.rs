@@ -118,7 +118,9 @@ pub fn openapi() -> Value {
             "/v1/jobs/{id}/evaluation": {"get": {"summary": "the independent frame-time check of the placement", "parameters": id_param,
                 "responses": with(error_responses(&["404", "409"]), "200", json_ok("Evaluation"))}},
             "/v1/jobs/{id}/impostors.glb": {"get": {"summary": "the baked impostors (jobs submitted with bake)", "parameters": id_param,
-                "responses": with(error_responses(&["404", "409"]), "200", json!({"description": "GLB", "content": {"model/gltf-binary": {}}}))}}
+                "responses": with(error_responses(&["404", "409"]), "200", json!({"description": "GLB", "content": {"model/gltf-binary": {}}}))}},
+            "/v1/jobs/{id}/report": {"get": {"summary": "a self-contained HTML report of the job: its run, evaluation and walkthrough frame times", "parameters": id_param,
+                "responses": with(error_responses(&["404", "409"]), "200", json!({"description": "HTML", "content": {"text/html": {}}}))}}
         },
         "components": {"schemas": schemas}
     })
@@ -157,6 +159,7 @@ mod tests {
             "/v1/jobs/{id}/placement",
             "/v1/jobs/{id}/evaluation",
             "/v1/jobs/{id}/impostors.glb",
+            "/v1/jobs/{id}/report",
             "/healthz",
         ] {
             assert!(doc["paths"].get(p).is_some(), "{p}");

@@ -318,6 +318,15 @@ async fn visibility_jobs_run_and_missing_inputs_are_refused() {
     assert_eq!(placement, expected, "the service places like the library");
     let (_, eval) = get_json(addr, &format!("/v1/jobs/{id}/evaluation")).await;
     assert_eq!(eval["visibility"]["mode"], "conservative", "{eval}");
+    let (s, html) = request(addr, "GET", &format!("/v1/jobs/{id}/report"), None, b"").await;
+    assert_eq!(s, 200);
+    let html = String::from_utf8(html).unwrap();
+    assert!(
+        html.starts_with("<!DOCTYPE html>"),
+        "{}",
+        &html[..80.min(html.len())]
+    );
+    assert!(html.contains("<svg"), "the walkthrough chart is drawn");
     assert_eq!(eval["visibility"]["missed_objects"], 0, "{eval}");
 
     // Conservative visibility needs geometry: a summary is refused up front.
