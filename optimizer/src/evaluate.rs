@@ -26,7 +26,7 @@ use serde::{Deserialize, Serialize};
 use crate::cost::{Cost, CostModel};
 use crate::error::{Error, Result};
 use crate::geom::{Aabb, Sphere, Vdi, ViewFrustum, face_direction};
-use crate::geometry::{AlphaMode, SceneGeometry};
+use crate::geometry::SceneGeometry;
 use crate::hierarchy::Hierarchy;
 use crate::impostor_model::ViewCell;
 use crate::input::SceneInput;
@@ -302,6 +302,22 @@ fn prepare(scene: &Scene, job: &Job, placement: &Placement, source: &str) -> Res
     })
 }
 
+impl Prepared {
+    /// The CPV of a view (its cell and direction), with the objects its
+    /// impostors replace and the impostors; empty lists outside CPVs.
+    fn view_cpv(&self, cell: [u32; 3], dir: DVec3) -> (Option<u32>, &[u32], &[u32]) {
+        let vdi = Vdi::containing(dir, self.level);
+        match self.lookup.get(&(self.grid.linear(cell), vdi)).copied() {
+            Some(c) => (
+                Some(c),
+                &self.cpv_replaced[c as usize],
+                &self.cpv_impostors[c as usize],
+            ),
+            None => (None, &[], &[]),
+        }
+    }
+}
+
 /// Exact time of one view. Objects outside `visible` (when given) are not
 /// drawn; those of them in the frustum are listed in `culled` with their
 /// distance, when asked.
@@ -360,75 +376,6 @@ fn view_time(
     model.frame_time(cost)
 }
 
-/// Per object, its range of instances in the geometry.
-fn instance_ranges(geom: &SceneGeometry, objects: usize) -> Vec<(usize, usize)> {
-    let mut r = vec![(0usize, 0usize); objects];
-    let mut i = 0;
-    while i < geom.instances.len() {
-        let o = geom.instances[i].object as usize;
-        let mut j = i;
-        while j < geom.instances.len() && geom.instances[j].object as usize == o {
-            j += 1;
-        }
-        if let Some(slot) = r.get_mut(o) {
-            *slot = (i, j);
-        }
-        i = j;
-    }
-    r
-}
-
-/// A point on a surface of object `o` that faces `eye` (or is double-sided)
-/// and lies in the frustum, drawn at random; `None` after a few misses.
-fn probe_point(
-    geom: &SceneGeometry,
-    range: (usize, usize),
-    f: &ViewFrustum,
-    rng: &mut Rng,
-) -> Option<DVec3> {
-    let insts = &geom.instances[range.0..range.1];
-    let total: usize = insts
-        .iter()
-        .map(|i| geom.meshes[i.mesh as usize].indices.len() / 3)
-        .sum();
-    if total == 0 {
-        return None;
-    }
-    for _ in 0..8 {
-        let mut t = (rng.next_u64() % total as u64) as usize;
-        let inst = insts.iter().find(|i| {
-            let n = geom.meshes[i.mesh as usize].indices.len() / 3;
-            if t < n {
-                true
-            } else {
-                t -= n;
-                false
-            }
-        })?;
-        let mesh = &geom.meshes[inst.mesh as usize];
-        let mat = &geom.materials[mesh.material as usize];
-        let v = |k: usize| {
-            inst.transform
-                .transform_point3(mesh.positions[mesh.indices[3 * t + k] as usize].as_dvec3())
-        };
-        let (a, b, c) = (v(0), v(1), v(2));
-        let (mut u, mut w) = (rng.f64(), rng.f64());
-        if u + w > 1.0 {
-            (u, w) = (1.0 - u, 1.0 - w);
-        }
-        let p = a + (b - a) * u + (c - a) * w;
-        let n = (b - a).cross(c - a);
-        let facing = n.dot(p - f.eye()) < 0.0;
-        if (!facing && !mat.double_sided) || mat.alpha_mode == AlphaMode::Blend {
-            continue;
-        }
-        if f.distance(p) <= 0.0 {
-            return Some(p);
-        }
-    }
-    None
-}
-
 /// Objects visible from the view point (rays through the image and at the
 /// nearest culled objects) that `visible` lacks: `(object, by_probe)`.
 #[allow(clippy::too_many_arguments)] // one view and its check budget
@@ -472,7 +419,9 @@ fn check_view(
             continue;
         }
         for _ in 0..2 {
-            let Some(p) = probe_point(geom, ranges[o as usize], f, rng) else {
+            let Some(p) = geom.surface_point(ranges[o as usize], f.eye(), 8, rng, |p| {
+                f.distance(p) <= 0.0
+            }) else {
                 break;
             };
             rays += 1;
@@ -602,7 +551,7 @@ pub fn evaluate_shared(
     let check = vis.is_some() && (opts.check_rays > 0 || opts.check_objects > 0);
     let caster = if check { input.caster() } else { None };
     let ranges = match (&input.geometry, caster) {
-        (Some(g), Some(_)) => instance_ranges(g, scene.objects.len()),
+        (Some(g), Some(_)) => g.instance_ranges(),
         _ => Vec::new(),
     };
     let samples: Vec<ViewResult> = (0..opts.views)
@@ -614,18 +563,7 @@ pub fn evaluate_shared(
                 .grid
                 .cell_of(eye)
                 .expect("sampled inside the view space");
-            let vdi = Vdi::containing(dir, prepared.level);
-            let cpv = prepared
-                .lookup
-                .get(&(prepared.grid.linear(cell), vdi))
-                .copied();
-            let (replaced, imps): (&[u32], &[u32]) = match cpv {
-                Some(c) => (
-                    &prepared.cpv_replaced[c as usize],
-                    &prepared.cpv_impostors[c as usize],
-                ),
-                None => (&[], &[]),
-            };
+            let (cpv, replaced, imps) = prepared.view_cpv(cell, dir);
             let outside = imps
                 .iter()
                 .any(|&i| !prepared.impostors[i as usize].cell.contains_point(eye));
@@ -818,18 +756,7 @@ pub fn frame_times(
             let Some(cell) = prepared.grid.cell_of(eye) else {
                 return f64::NAN;
             };
-            let vdi = Vdi::containing(dir, prepared.level);
-            let cpv = prepared
-                .lookup
-                .get(&(prepared.grid.linear(cell), vdi))
-                .copied();
-            let (replaced, imps): (&[u32], &[u32]) = match cpv {
-                Some(c) => (
-                    &prepared.cpv_replaced[c as usize],
-                    &prepared.cpv_impostors[c as usize],
-                ),
-                None => (&[], &[]),
-            };
+            let (_, replaced, imps) = prepared.view_cpv(cell, dir);
             let set = shared.visibility.map(|v| &v.cell(cell).set);
             view_time(
                 scene,

@@ -509,6 +509,81 @@ fn smooth_normals(positions: &[Vec3], indices: &[u32]) -> Vec<Vec3> {
     n.into_iter().map(Vec3::normalize_or_zero).collect()
 }
 
+impl SceneGeometry {
+    /// Per object, its range of `instances` (instances of one object are
+    /// contiguous); `(0, 0)` for an object without triangles.
+    pub fn instance_ranges(&self) -> Vec<(usize, usize)> {
+        let mut r = vec![(0usize, 0usize); self.objects];
+        let mut i = 0;
+        while i < self.instances.len() {
+            let o = self.instances[i].object as usize;
+            let mut j = i;
+            while j < self.instances.len() && self.instances[j].object as usize == o {
+                j += 1;
+            }
+            if let Some(slot) = r.get_mut(o) {
+                *slot = (i, j);
+            }
+            i = j;
+        }
+        r
+    }
+
+    /// A random point on a surface of the object whose instances are
+    /// `range` that `eye` could see: on a triangle facing it (or
+    /// double-sided), not blended, and accepted by `keep`. `None` after
+    /// `tries` draws without one.
+    pub fn surface_point(
+        &self,
+        range: (usize, usize),
+        eye: glam::DVec3,
+        tries: u32,
+        rng: &mut crate::rng::Rng,
+        keep: impl Fn(glam::DVec3) -> bool,
+    ) -> Option<glam::DVec3> {
+        let insts = self.instances.get(range.0..range.1)?;
+        let total: usize = insts
+            .iter()
+            .map(|i| self.meshes[i.mesh as usize].indices.len() / 3)
+            .sum();
+        if total == 0 {
+            return None;
+        }
+        for _ in 0..tries {
+            let mut t = (rng.next_u64() % total as u64) as usize;
+            let inst = insts.iter().find(|i| {
+                let n = self.meshes[i.mesh as usize].indices.len() / 3;
+                if t < n {
+                    true
+                } else {
+                    t -= n;
+                    false
+                }
+            })?;
+            let mesh = &self.meshes[inst.mesh as usize];
+            let mat = &self.materials[mesh.material as usize];
+            if mat.alpha_mode == AlphaMode::Blend {
+                continue;
+            }
+            let v = |k: usize| {
+                inst.transform
+                    .transform_point3(mesh.positions[mesh.indices[3 * t + k] as usize].as_dvec3())
+            };
+            let (a, b, c) = (v(0), v(1), v(2));
+            let (mut u, mut w) = (rng.f64(), rng.f64());
+            if u + w > 1.0 {
+                (u, w) = (1.0 - u, 1.0 - w);
+            }
+            let p = a + (b - a) * u + (c - a) * w;
+            let facing = (b - a).cross(c - a).dot(p - eye) < 0.0;
+            if (facing || mat.double_sided) && keep(p) {
+                return Some(p);
+            }
+        }
+        None
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -613,16 +613,7 @@ fn one_run_report(
             unsolved_cpvs: s.unsolved_cpvs,
             seconds,
             stage_seconds: out.stats.seconds.clone(),
-            eval: Some(EvalSummary {
-                views: eval.views,
-                max_ms: eval.max_ms,
-                p99_ms: eval.p99_ms,
-                p50_ms: eval.p50_ms,
-                mean_ms: eval.mean_ms,
-                violations: eval.violations,
-                violations_in_solved: eval.violations_in_solved,
-                max_ms_in_solved: eval.max_ms_in_solved,
-            }),
+            eval: Some(EvalSummary::from(eval)),
         }],
         walkthroughs: vec![Walkthrough {
             method,

@@ -136,6 +136,21 @@ pub struct EvalSummary {
     pub max_ms_in_solved: f64,
 }
 
+impl From<&crate::evaluate::Evaluation> for EvalSummary {
+    fn from(e: &crate::evaluate::Evaluation) -> Self {
+        EvalSummary {
+            views: e.views,
+            max_ms: e.max_ms,
+            p99_ms: e.p99_ms,
+            p50_ms: e.p50_ms,
+            mean_ms: e.mean_ms,
+            violations: e.violations,
+            violations_in_solved: e.violations_in_solved,
+            max_ms_in_solved: e.max_ms_in_solved,
+        }
+    }
+}
+
 /// Frame times along a walkthrough path.
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize, JsonSchema)]
 pub struct Walkthrough {

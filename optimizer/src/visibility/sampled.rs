@@ -28,7 +28,7 @@ use glam::DVec3;
 
 use super::{CellVisibility, ObjectSet};
 use crate::geom::{Aabb, frustum_half_diagonal};
-use crate::geometry::{AlphaMode, SceneGeometry};
+use crate::geometry::SceneGeometry;
 use crate::job::Job;
 use crate::raycast::RayCaster;
 use crate::rng::Rng;
@@ -54,19 +54,7 @@ impl<'a> Sampled<'a> {
         let hd = frustum_half_diagonal(job.camera.fov_deg, f64::from(w) / f64::from(h));
         let half_pi = std::f64::consts::FRAC_PI_2;
         let [lo, hi] = job.view_space.pitch_deg.map(f64::to_radians);
-        let mut ranges = vec![(0usize, 0usize); geometry.object_count()];
-        let mut i = 0;
-        while i < geometry.instances.len() {
-            let o = geometry.instances[i].object as usize;
-            let mut j = i;
-            while j < geometry.instances.len() && geometry.instances[j].object as usize == o {
-                j += 1;
-            }
-            if let Some(r) = ranges.get_mut(o) {
-                *r = (i, j);
-            }
-            i = j;
-        }
+        let ranges = geometry.instance_ranges();
         Sampled {
             caster,
             geometry,
@@ -135,7 +123,10 @@ impl<'a> Sampled<'a> {
             }
             for _ in 0..self.probes {
                 let p = rng.in_box(cell.min, cell.max);
-                let Some(x) = self.surface_point(o, p, &mut rng) else {
+                let Some(x) =
+                    self.geometry
+                        .surface_point(self.ranges[o as usize], p, 4, &mut rng, |_| true)
+                else {
                     continue;
                 };
                 if self.caster.segment_clear(p, x) {
@@ -162,52 +153,5 @@ impl<'a> Sampled<'a> {
             found_by_probes: probed,
             covered: true,
         }
-    }
-
-    /// A random point on a surface of object `o` that faces `p` (or is
-    /// double-sided) and is not fully transparent; `None` after a few tries.
-    fn surface_point(&self, o: u32, p: DVec3, rng: &mut Rng) -> Option<DVec3> {
-        let g = self.geometry;
-        let (a, b) = *self.ranges.get(o as usize)?;
-        let insts = &g.instances[a..b];
-        let total: usize = insts
-            .iter()
-            .map(|i| g.meshes[i.mesh as usize].indices.len() / 3)
-            .sum();
-        if total == 0 {
-            return None;
-        }
-        for _ in 0..4 {
-            let mut t = (rng.next_u64() % total as u64) as usize;
-            let inst = insts.iter().find(|i| {
-                let n = g.meshes[i.mesh as usize].indices.len() / 3;
-                if t < n {
-                    true
-                } else {
-                    t -= n;
-                    false
-                }
-            })?;
-            let mesh = &g.meshes[inst.mesh as usize];
-            let mat = &g.materials[mesh.material as usize];
-            if mat.alpha_mode == AlphaMode::Blend {
-                continue;
-            }
-            let v = |k: usize| {
-                inst.transform
-                    .transform_point3(mesh.positions[mesh.indices[3 * t + k] as usize].as_dvec3())
-            };
-            let (a, b, c) = (v(0), v(1), v(2));
-            let (mut u, mut w) = (rng.f64(), rng.f64());
-            if u + w > 1.0 {
-                (u, w) = (1.0 - u, 1.0 - w);
-            }
-            let x = a + (b - a) * u + (c - a) * w;
-            let facing = (b - a).cross(c - a).dot(x - p) < 0.0;
-            if facing || mat.double_sided {
-                return Some(x);
-            }
-        }
-        None
     }
 }
