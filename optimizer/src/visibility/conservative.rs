@@ -143,6 +143,9 @@ impl Conservative {
             .map(|o| !closed_meets(&o.support, cell) && cell.min.y > o.open_below)
             .collect();
         let mut visible = ObjectSet::new(scene.objects.len());
+        // Per cluster, its objects not yet known to be visible: a cluster
+        // with none left needs no test from later samples.
+        let mut hidden: Vec<u32> = h.nodes.iter().map(|n| n.objects.1 - n.objects.0).collect();
         let root = h.nodes[0].aabb;
         let mut horizon = Horizon::new([root.min.y, root.max.y]);
         let n = self.samples;
@@ -158,7 +161,7 @@ impl Conservative {
                                 (f64::from(k) + 0.5) / f64::from(n[2]),
                             );
                     horizon.build(s, self, &usable);
-                    mark_visible(&horizon, cell, scene, h, &mut visible);
+                    mark_visible(&horizon, cell, scene, h, &mut visible, &mut hidden);
                 }
             }
         }
@@ -355,6 +358,20 @@ fn rect_distances(s: DVec3, x0: f64, x1: f64, z0: f64, z1: f64) -> (f64, f64) {
     ((dx * dx + dz * dz).sqrt(), (fx * fx + fz * fz).sqrt())
 }
 
+/// `x.floor() as i64` without a libm call (saturating like the cast).
+#[inline]
+fn floor_i64(x: f64) -> i64 {
+    let i = x as i64;
+    if (i as f64) > x { i.saturating_sub(1) } else { i }
+}
+
+/// `x.ceil() as i64` without a libm call (saturating like the cast).
+#[inline]
+fn ceil_i64(x: f64) -> i64 {
+    let i = x as i64;
+    if (i as f64) < x { i.saturating_add(1) } else { i }
+}
+
 fn bin_of(k: i64) -> usize {
     k.rem_euclid(BINS as i64) as usize
 }
@@ -437,8 +454,8 @@ impl Horizon {
         let lo = (y[0] - s.y) / if y[0] <= s.y { r_near } else { r_far };
         let hi = (y[1] - s.y) / if y[1] >= s.y { r_near } else { r_far };
         let (a0, a1) = angular_interval(s, x0, x1, z0, z1);
-        let first = (a0 / BIN).floor() as i64;
-        let last = (a1 / BIN).floor() as i64;
+        let first = floor_i64(a0 / BIN);
+        let last = floor_i64(a1 / BIN);
         (first..=last).all(|k| {
             let b = bin_of(k);
             self.closed[b] <= r_near
@@ -530,8 +547,8 @@ impl Horizon {
             };
             let (a0, a1) = angular_interval(s, x0, x1, z0, z1);
             // Bins entirely inside [a0, a1], with a hair of safety.
-            let first = (a0 / BIN + 1e-9).ceil() as i64;
-            let last = (a1 / BIN - 1e-9).floor() as i64; // exclusive
+            let first = ceil_i64(a0 / BIN + 1e-9);
+            let last = floor_i64(a1 / BIN - 1e-9); // exclusive
             // The loosest interval it can get in any bin.
             let (_, r_far) = rect_distances(s, x0, x1, z0, z1);
             let loose_lo = (bot - s.y) / if bot <= s.y { r_near } else { r_far };
@@ -548,7 +565,7 @@ impl Horizon {
             let [y_lo, y_hi] = self.y_range;
             let corner_bins: [i64; 3] = [0, 1, 2].map(|i| {
                 if i < nc {
-                    (corners[i].0 / BIN).floor() as i64
+                    floor_i64(corners[i].0 / BIN)
                 } else {
                     i64::MIN
                 }
@@ -680,19 +697,27 @@ impl Horizon {
             return (0..BINS).all(covered);
         }
         let (a0, a1) = angular_interval(s, x0, x1, z0, z1);
-        let first = (a0 / BIN).floor() as i64;
-        let last = (a1 / BIN).floor() as i64;
+        let first = floor_i64(a0 / BIN);
+        let last = floor_i64(a1 / BIN);
         (first..=last).all(|k| covered(bin_of(k)))
     }
 }
 
 /// Marks the objects not hidden from the horizon's sample.
-fn mark_visible(hz: &Horizon, cell: &Aabb, scene: &Scene, h: &Hierarchy, visible: &mut ObjectSet) {
+/// `hidden` counts, per cluster, its objects not yet in `visible`.
+fn mark_visible(
+    hz: &Horizon,
+    cell: &Aabb,
+    scene: &Scene,
+    h: &Hierarchy,
+    visible: &mut ObjectSet,
+    hidden: &mut [u32],
+) {
     let meets = |b: &Aabb| b.min.cmple(cell.max).all() && cell.min.cmple(b.max).all();
     let mut stack = vec![0u32];
     while let Some(n) = stack.pop() {
         let node = &h.nodes[n as usize];
-        if !meets(&node.aabb) && hz.hides(&node.aabb) {
+        if hidden[n as usize] == 0 || (!meets(&node.aabb) && hz.hides(&node.aabb)) {
             continue;
         }
         match node.children {
@@ -709,6 +734,11 @@ fn mark_visible(hz: &Horizon, cell: &Aabb, scene: &Scene, h: &Hierarchy, visible
                     let b = Aabb::new(ob.min, ob.max);
                     if meets(&b) || !hz.hides(&b) {
                         visible.insert(o);
+                        let mut k = n;
+                        while k != u32::MAX {
+                            hidden[k as usize] -= 1;
+                            k = h.nodes[k as usize].parent;
+                        }
                     }
                 }
             }
