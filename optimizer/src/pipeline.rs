@@ -244,24 +244,7 @@ pub fn place_shared(
             0,
         );
         st.end("placement");
-        let stats = Stats {
-            threads: rayon::current_num_threads(),
-            objects: scene.objects.len() as u64,
-            triangles: scene.total_triangles(),
-            hierarchy_nodes: hierarchy.nodes.len() as u64,
-            cells: pv.grid.len(),
-            regions_visited: pv.regions_visited,
-            enclosing_frusta: pv.cone_evaluations,
-            cpvs: pv.cpvs.len() as u64,
-            impostors: placement.summary.impostors,
-            memory_bytes: placement.summary.memory_bytes,
-            unsolved_cpvs: placement.summary.unsolved_cpvs,
-            seconds: std::mem::take(&mut st.times),
-            peak_rss_bytes: peak_rss_bytes(),
-            visibility: visibility.map(Visibility::stats),
-            lod: ctx.lod_stats(input.lod.clone()),
-            ..Stats::default()
-        };
+        let stats = run_stats(&ctx, input, &pv, &placement, std::mem::take(&mut st.times));
         ctl.progress("placement", 1.0);
         return Ok(PlaceOutput { placement, stats });
     }
@@ -306,29 +289,43 @@ pub fn place_shared(
     st.end("placement");
 
     let stats = Stats {
-        threads: rayon::current_num_threads(),
-        objects: scene.objects.len() as u64,
-        triangles: scene.total_triangles(),
-        hierarchy_nodes: hierarchy.nodes.len() as u64,
-        cells: pv.grid.len(),
-        regions_visited: pv.regions_visited,
-        enclosing_frusta: pv.cone_evaluations,
-        cpvs: pv.cpvs.len() as u64,
         candidate_pairs: cands.pairs.len() as u64,
         candidates: cands.list.len() as u64,
         greedy_choices: sel.accepted,
         score_evaluations: sel.evaluations,
         pruned: sel.pruned,
-        impostors: placement.summary.impostors,
-        memory_bytes: placement.summary.memory_bytes,
-        unsolved_cpvs: placement.summary.unsolved_cpvs,
-        seconds: std::mem::take(&mut st.times),
-        peak_rss_bytes: peak_rss_bytes(),
-        visibility: visibility.map(Visibility::stats),
-        lod: ctx.lod_stats(input.lod.clone()),
+        ..run_stats(&ctx, input, &pv, &placement, std::mem::take(&mut st.times))
     };
     ctl.progress("placement", 1.0);
     Ok(PlaceOutput { placement, stats })
+}
+
+/// The counters every method reports (candidate and greedy counters zero).
+fn run_stats(
+    ctx: &Context,
+    input: &SceneInput,
+    pv: &ProblemViews,
+    placement: &Placement,
+    seconds: Vec<StageTime>,
+) -> Stats {
+    Stats {
+        threads: rayon::current_num_threads(),
+        objects: ctx.scene.objects.len() as u64,
+        triangles: ctx.scene.total_triangles(),
+        hierarchy_nodes: ctx.hierarchy.nodes.len() as u64,
+        cells: pv.grid.len(),
+        regions_visited: pv.regions_visited,
+        enclosing_frusta: pv.cone_evaluations,
+        cpvs: pv.cpvs.len() as u64,
+        impostors: placement.summary.impostors,
+        memory_bytes: placement.summary.memory_bytes,
+        unsolved_cpvs: placement.summary.unsolved_cpvs,
+        seconds,
+        peak_rss_bytes: peak_rss_bytes(),
+        visibility: ctx.visibility.map(Visibility::stats),
+        lod: ctx.lod_stats(input.lod.clone()),
+        ..Stats::default()
+    }
 }
 
 /// Turns the selection into the placement JSON structure.

@@ -362,14 +362,22 @@ fn rect_distances(s: DVec3, x0: f64, x1: f64, z0: f64, z1: f64) -> (f64, f64) {
 #[inline]
 fn floor_i64(x: f64) -> i64 {
     let i = x as i64;
-    if (i as f64) > x { i.saturating_sub(1) } else { i }
+    if (i as f64) > x {
+        i.saturating_sub(1)
+    } else {
+        i
+    }
 }
 
 /// `x.ceil() as i64` without a libm call (saturating like the cast).
 #[inline]
 fn ceil_i64(x: f64) -> i64 {
     let i = x as i64;
-    if (i as f64) < x { i.saturating_add(1) } else { i }
+    if (i as f64) < x {
+        i.saturating_add(1)
+    } else {
+        i
+    }
 }
 
 fn bin_of(k: i64) -> usize {
