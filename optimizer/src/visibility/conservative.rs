@@ -202,7 +202,7 @@ struct TreeNode {
     count: u32,
 }
 
-const LEAF_SIZE: usize = 4;
+const LEAF_SIZE: usize = 16;
 
 /// Builds the footprint hierarchy by median splits (deterministic).
 fn build_tree(occ: &[Shrunk]) -> (Vec<TreeNode>, Vec<u32>) {
@@ -290,6 +290,8 @@ struct Horizon {
     /// range is hidden by a single entry of the bin (`inf`: none).
     closed: Vec<f64>,
     touched: Vec<u32>,
+    /// Scratch: a footprint leaf's occluders by distance.
+    leaf: Vec<(f64, u32)>,
     /// `(σ_c, b)`: blocks `σ ≥ σ_c` for targets with bottom ≥ `b`.
     ceilings: Vec<(f64, f64)>,
     /// `(σ_f, h)`: blocks `σ ≤ σ_f` for targets with top ≤ `h`.
@@ -333,29 +335,60 @@ fn direction(p: f64) -> (f64, f64) {
 /// Angular interval `[lo, hi]` (diamond angle, `hi − lo < 2`, `lo` may be
 /// below 0) of a footprint rectangle seen from outside it.
 fn angular_interval(s: DVec3, x0: f64, x1: f64, z0: f64, z1: f64) -> (f64, f64) {
-    let c = azimuth((x0 + x1) * 0.5 - s.x, (z0 + z1) * 0.5 - s.z);
-    let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
-    for (x, z) in [(x0, z0), (x1, z0), (x1, z1), (x0, z1)] {
-        let mut d = azimuth(x - s.x, z - s.z) - c;
-        if d > PERIOD * 0.5 {
-            d -= PERIOD;
-        } else if d < -PERIOD * 0.5 {
-            d += PERIOD;
+    // Seen from outside, two corners bound the rectangle's directions:
+    // the first clockwise-most, the second counter-clockwise-most.
+    let ((ax, az), (bx, bz)) = if s.x < x0 {
+        if s.z < z0 {
+            ((x1, z0), (x0, z1))
+        } else if s.z > z1 {
+            ((x0, z0), (x1, z1))
+        } else {
+            ((x0, z0), (x0, z1))
         }
-        lo = lo.min(d);
-        hi = hi.max(d);
-    }
-    (c + lo, c + hi)
+    } else if s.x > x1 {
+        if s.z < z0 {
+            ((x1, z1), (x0, z0))
+        } else if s.z > z1 {
+            ((x0, z1), (x1, z0))
+        } else {
+            ((x1, z1), (x1, z0))
+        }
+    } else if s.z < z0 {
+        ((x1, z0), (x0, z0))
+    } else if s.z > z1 {
+        ((x0, z1), (x1, z1))
+    } else {
+        // Inside (callers treat this case apart): every direction.
+        return (0.0, PERIOD);
+    };
+    let lo = azimuth(ax - s.x, az - s.z);
+    let hi = azimuth(bx - s.x, bz - s.z);
+    if hi < lo { (lo - PERIOD, hi) } else { (lo, hi) }
 }
 
 /// Horizontal distance from `s` to a footprint rectangle (0 inside) and to
 /// its farthest corner.
 fn rect_distances(s: DVec3, x0: f64, x1: f64, z0: f64, z1: f64) -> (f64, f64) {
+    (
+        rect_near2(s, x0, x1, z0, z1).sqrt(),
+        rect_far(s, x0, x1, z0, z1),
+    )
+}
+
+/// Squared horizontal distance from `s` to a footprint rectangle.
+#[inline]
+fn rect_near2(s: DVec3, x0: f64, x1: f64, z0: f64, z1: f64) -> f64 {
     let dx = (x0 - s.x).max(s.x - x1).max(0.0);
     let dz = (z0 - s.z).max(s.z - z1).max(0.0);
+    dx * dx + dz * dz
+}
+
+/// Horizontal distance from `s` to a footprint rectangle's farthest corner.
+#[inline]
+fn rect_far(s: DVec3, x0: f64, x1: f64, z0: f64, z1: f64) -> f64 {
     let fx = (s.x - x0).abs().max((s.x - x1).abs());
     let fz = (s.z - z0).abs().max((s.z - z1).abs());
-    ((dx * dx + dz * dz).sqrt(), (fx * fx + fz * fz).sqrt())
+    (fx * fx + fz * fz).sqrt()
 }
 
 /// `x.floor() as i64` without a libm call (saturating like the cast).
@@ -398,6 +431,7 @@ impl Horizon {
             bins: vec![Vec::new(); BINS],
             closed: vec![f64::INFINITY; BINS],
             touched: Vec::new(),
+            leaf: Vec::new(),
             ceilings: Vec::new(),
             floors: Vec::new(),
         }
@@ -418,11 +452,13 @@ impl Horizon {
         if c.tree.is_empty() {
             return;
         }
-        let near = |r: &[f64; 4]| rect_distances(s, r[0], r[1], r[2], r[3]).0;
+        // Ordered by squared distance (the same order, one root per pop).
+        let near = |r: &[f64; 4]| rect_near2(s, r[0], r[1], r[2], r[3]);
         // Min-heap on distance (ties by node id: deterministic).
         let mut heap = std::collections::BinaryHeap::new();
         heap.push(std::cmp::Reverse((Dist(near(&c.tree[0].rect)), 0u32)));
-        while let Some(std::cmp::Reverse((Dist(r_near), id))) = heap.pop() {
+        while let Some(std::cmp::Reverse((Dist(near2), id))) = heap.pop() {
+            let r_near = near2.sqrt();
             let node = &c.tree[id as usize];
             let [x0, x1, z0, z1] = node.rect;
             let outside = s.x < x0 || s.x > x1 || s.z < z0 || s.z > z1;
@@ -430,11 +466,23 @@ impl Horizon {
                 continue;
             }
             if node.left == u32::MAX {
-                for &o in &c.order[node.first as usize..(node.first + node.count) as usize] {
-                    if usable[o as usize] {
-                        self.add(&c.occluders[o as usize]);
-                    }
+                // Nearest first: nearer occluders make farther ones useless.
+                let mut leaf = std::mem::take(&mut self.leaf);
+                leaf.clear();
+                leaf.extend(
+                    c.order[node.first as usize..(node.first + node.count) as usize]
+                        .iter()
+                        .filter(|&&o| usable[o as usize])
+                        .map(|&o| {
+                            let b = &c.occluders[o as usize].b;
+                            (rect_near2(s, b.min.x, b.max.x, b.min.z, b.max.z), o)
+                        }),
+                );
+                leaf.sort_unstable_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+                for &(_, o) in &leaf {
+                    self.add(&c.occluders[o as usize]);
                 }
+                self.leaf = leaf;
             } else {
                 for ch in [node.left, node.right] {
                     heap.push(std::cmp::Reverse((
@@ -458,7 +506,7 @@ impl Horizon {
     fn dominated(&self, rect: [f64; 4], y: [f64; 2], r_near: f64) -> bool {
         let s = self.s;
         let [x0, x1, z0, z1] = rect;
-        let (_, r_far) = rect_distances(s, x0, x1, z0, z1);
+        let r_far = rect_far(s, x0, x1, z0, z1);
         let lo = (y[0] - s.y) / if y[0] <= s.y { r_near } else { r_far };
         let hi = (y[1] - s.y) / if y[1] >= s.y { r_near } else { r_far };
         let (a0, a1) = angular_interval(s, x0, x1, z0, z1);
@@ -493,7 +541,23 @@ impl Horizon {
             if s.x >= x0 && s.x <= x1 && s.z >= z0 && s.z <= z1 {
                 return; // on the footprint's border
             }
-            let (r_near, _) = rect_distances(s, x0, x1, z0, z1);
+            let (r_near, r_far) = rect_distances(s, x0, x1, z0, z1);
+            let (a0, a1) = angular_interval(s, x0, x1, z0, z1);
+            // Bins entirely inside [a0, a1], with a hair of safety.
+            let first = ceil_i64(a0 / BIN + 1e-9);
+            let last = floor_i64(a1 / BIN - 1e-9); // exclusive
+            // The loosest interval it can get in any bin.
+            let loose_lo = (bot - s.y) / if bot <= s.y { r_near } else { r_far };
+            let loose_hi = (top - s.y) / if top >= s.y { r_near } else { r_far };
+            let useless = |h: &Horizon, b: usize| {
+                h.closed[b] <= r_near
+                    || h.bins[b]
+                        .iter()
+                        .any(|f| f.r_key <= r_near && f.lo <= loose_lo && f.hi >= loose_hi)
+            };
+            if (first..last).all(|k| useless(self, bin_of(k))) {
+                return; // everything behind it is hidden already
+            }
             // The front chain's corners (their distance bounds the entry
             // distance over any azimuth range that contains them).
             let mut corners: [(f64, f64); 3] = [(0.0, 0.0); 3];
@@ -553,23 +617,6 @@ impl Horizon {
                     f64::INFINITY
                 }
             };
-            let (a0, a1) = angular_interval(s, x0, x1, z0, z1);
-            // Bins entirely inside [a0, a1], with a hair of safety.
-            let first = ceil_i64(a0 / BIN + 1e-9);
-            let last = floor_i64(a1 / BIN - 1e-9); // exclusive
-            // The loosest interval it can get in any bin.
-            let (_, r_far) = rect_distances(s, x0, x1, z0, z1);
-            let loose_lo = (bot - s.y) / if bot <= s.y { r_near } else { r_far };
-            let loose_hi = (top - s.y) / if top >= s.y { r_near } else { r_far };
-            let useless = |h: &Horizon, b: usize| {
-                h.closed[b] <= r_near
-                    || h.bins[b]
-                        .iter()
-                        .any(|f| f.r_key <= r_near && f.lo <= loose_lo && f.hi >= loose_hi)
-            };
-            if (first..last).all(|k| useless(self, bin_of(k))) {
-                return; // everything behind it is hidden already
-            }
             let [y_lo, y_hi] = self.y_range;
             let corner_bins: [i64; 3] = [0, 1, 2].map(|i| {
                 if i < nc {
@@ -974,7 +1021,7 @@ mod property {
     fn no_visible_object_is_culled() {
         let mut rng = Rng::new(77);
         let mut culled_total = 0usize;
-        for case in 0..6 {
+        for case in 0..40 {
             let scene = random_scene(&mut rng);
             let h = Hierarchy::build(&scene);
             let geom = crate::testutil::box_geometry(&scene);
