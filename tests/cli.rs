@@ -36,6 +36,16 @@ fn place_and_evaluate_small_city() {
         assert_eq!(e["violations"], 0, "{e}");
     }
     assert_eq!(e["views"], 4000);
+    // Every impostor's parallax checked geometrically: near the 1 px budget
+    // (the layer formulas are small-angle approximations), never far over.
+    let x = &e["parallax"];
+    assert_eq!(x["impostors"], sum["impostors"], "{x}");
+    let max = x["max_px"].as_f64().unwrap();
+    assert!(
+        max > 0.0 && max < 1.5 * x["max_error_px"].as_f64().unwrap(),
+        "{x}"
+    );
+    assert_eq!(x["over_budget_1_5"], 0, "{x}");
 }
 
 #[test]

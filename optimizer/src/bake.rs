@@ -135,6 +135,95 @@ fn slabs(imp: &PlacedImpostor) -> (DVec3, Vec<(f64, f64, f64)>) {
     (eye, slabs)
 }
 
+/// The geometric parallax of a placed impostor: the largest angle, radians,
+/// between a point of its cluster's sphere and that point's image on its
+/// layer (where the bake draws it: on the ray from the reference viewpoint,
+/// at the layer's depth), seen from viewpoints of its view cell. `points`
+/// points of the sphere (half on its surface) are each checked from `views`
+/// viewpoints (box: corners first, then anywhere; shaft: half at its near
+/// end, half out to 16 times its minimum distance, half on its rim).
+/// Independent of the layer formula that chose the layer count, so it checks
+/// the image quality criterion: at most `max_error_px` pixel angles.
+pub fn parallax(imp: &PlacedImpostor, rng: &mut crate::rng::Rng, points: u32, views: u32) -> f64 {
+    let c = DVec3::from_array(imp.sphere.center);
+    let r = imp.sphere.radius;
+    let (eye, slabs) = slabs(imp);
+    let fwd = (c - eye).normalize_or_zero();
+    if fwd == DVec3::ZERO || slabs.is_empty() {
+        return 0.0;
+    }
+    let viewpoints: Vec<DVec3> = match &imp.view_cell {
+        ViewCellJson::Box { min, max } => {
+            let (lo, hi) = (DVec3::from_array(*min), DVec3::from_array(*max));
+            (0..views)
+                .map(|i| {
+                    if i < 8 {
+                        DVec3::new(
+                            if i & 1 == 0 { lo.x } else { hi.x },
+                            if i & 2 == 0 { lo.y } else { hi.y },
+                            if i & 4 == 0 { lo.z } else { hi.z },
+                        )
+                    } else {
+                        rng.in_box(lo, hi)
+                    }
+                })
+                .collect()
+        }
+        ViewCellJson::Shaft {
+            apex,
+            axis,
+            half_angle_deg,
+            min_distance,
+        } => {
+            let apex = DVec3::from_array(*apex);
+            let u = DVec3::from_array(*axis).normalize_or_zero();
+            let (t1, t2) = u.any_orthonormal_pair();
+            let alpha = half_angle_deg.to_radians();
+            (0..views)
+                .map(|i| {
+                    let d = if i % 2 == 0 {
+                        min_distance * rng.range(1.0, 1.5)
+                    } else {
+                        min_distance * 16f64.powf(rng.f64())
+                    };
+                    let a = if i % 4 < 2 {
+                        alpha
+                    } else {
+                        alpha * rng.f64().sqrt()
+                    };
+                    let phi = rng.range(0.0, std::f64::consts::TAU);
+                    let dir = u * a.cos() + (t1 * phi.cos() + t2 * phi.sin()) * a.sin();
+                    apex + dir * d
+                })
+                .collect()
+        }
+    };
+    let mut worst: f64 = 0.0;
+    for i in 0..points {
+        let mut w = rng.unit_vector();
+        if i % 2 == 1 {
+            w *= rng.f64().cbrt();
+        }
+        let p = c + w * r;
+        let z = (p - eye).dot(fwd);
+        if z <= 0.0 {
+            continue;
+        }
+        let k = slabs
+            .iter()
+            .position(|s| z < s.1)
+            .unwrap_or(slabs.len() - 1);
+        let q = eye + (p - eye) * (slabs[k].2 / z);
+        for v in &viewpoints {
+            let (a, b) = (p - *v, q - *v);
+            if a.length_squared() > 0.0 && b.length_squared() > 0.0 {
+                worst = worst.max(a.angle_between(b));
+            }
+        }
+    }
+    worst
+}
+
 /// Checks that the placement's object ids exist in the geometry.
 fn check_objects(geom: &SceneGeometry, placement: &Placement, source: &str) -> Result<()> {
     let count = geom.object_count();
@@ -728,6 +817,92 @@ mod tests {
             // The layer sits at the slab's middle inverse depth.
             assert!((1.0 / s[k].2 - 0.5 * (w[k] + w[k + 1])).abs() < 1e-12);
         }
+    }
+
+    #[test]
+    fn parallax_falls_with_the_layer_count() {
+        let mut imp = shaft_impostor(1);
+        let mut last = f64::INFINITY;
+        for layers in [1, 4, 16, 64] {
+            imp.layers = layers;
+            let p = parallax(&imp, &mut crate::rng::Rng::new(5), 64, 64);
+            assert!(p > 0.0 && p < last, "{layers} layers: {p}");
+            last = p;
+        }
+        // One layer, box view cell: the sphere (R = 1) lies 9–11 m from the
+        // cell's centre, its layer at 1/z = (1/9 + 1/11)/2; seen from a
+        // corner 1 m aside, the sphere's far pole is drawn
+        // atan(1/9.9) − atan(1/11) = 0.0100 rad away, and nothing is drawn
+        // farther off than the lateral shift over the near depth, 1/9 rad.
+        imp.layers = 1;
+        imp.sphere.radius = 1.0;
+        imp.sphere.center = [0.0, 0.0, 10.0];
+        imp.view_cell = ViewCellJson::Box {
+            min: [-1.0, -1.0, -1e-9],
+            max: [1.0, 1.0, 1e-9],
+        };
+        let p = parallax(&imp, &mut crate::rng::Rng::new(1), 256, 64);
+        assert!(p > 0.008 && p < 1.0 / 9.0, "{p}");
+    }
+
+    #[test]
+    fn the_layer_formulas_keep_parallax_near_the_budget() {
+        // The design's layer counts (small-angle approximations) against
+        // the geometry the bake draws, where placements use them: shafts
+        // at least 8 radii away, boxes at least 3 half-diagonals away.
+        let job = crate::job::Job::with_view_space([0.0; 3], [1.0; 3]);
+        let model = crate::impostor_model::ImpostorModel::new(&job);
+        let theta = job.pixel_angle();
+        let mut rng = crate::rng::Rng::new(9);
+        let mut worst: f64 = 0.0;
+        for i in 0..60 {
+            let r = rng.range(1.0, 40.0);
+            let sphere = crate::geom::Sphere {
+                center: DVec3::ZERO,
+                radius: r,
+            };
+            let mut imp = shaft_impostor(1);
+            imp.sphere.radius = r;
+            imp.sphere.center = [0.0; 3];
+            if i % 2 == 0 {
+                let alpha = [5.625f64, 11.25, 22.5, 45.0][i / 2 % 4].to_radians();
+                let d = r * rng.range(8.0, 64.0);
+                let Some(spec) = model.shaft(&sphere, alpha, d) else {
+                    continue;
+                };
+                imp.layers = spec.layers;
+                imp.view_cell = ViewCellJson::Shaft {
+                    apex: [0.0; 3],
+                    axis: rng.unit_vector().to_array(),
+                    half_angle_deg: alpha.to_degrees(),
+                    min_distance: d,
+                };
+            } else {
+                let half = DVec3::new(
+                    rng.range(5.0, 50.0),
+                    rng.range(0.2, 10.0),
+                    rng.range(5.0, 50.0),
+                );
+                let at = rng.unit_vector() * (half.length() * rng.range(3.0, 20.0) + r);
+                let cell = crate::geom::Aabb::new(at - half, at + half);
+                let Some(spec) = model.boxed(&sphere, &cell) else {
+                    continue;
+                };
+                imp.layers = spec.layers;
+                imp.view_cell = ViewCellJson::Box {
+                    min: cell.min.to_array(),
+                    max: cell.max.to_array(),
+                };
+            }
+            let px = parallax(&imp, &mut rng, 48, 48) / theta;
+            assert!(
+                px < 1.3 * job.max_error_px,
+                "case {i}: {px} px with {imp:?}"
+            );
+            worst = worst.max(px);
+        }
+        // The samples do find errors near the budget (the check has teeth).
+        assert!(worst > 0.7, "{worst}");
     }
 
     #[test]

@@ -147,6 +147,72 @@ pub struct Evaluation {
     /// The visibility used and its check (absent without visibility).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub visibility: Option<VisibilityCheck>,
+    /// Geometric parallax of the impostors (absent without impostors).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub parallax: Option<ParallaxCheck>,
+}
+
+/// The image quality criterion checked geometrically for every impostor
+/// (`evaluation.parallax`): how far a point of the cluster and its image
+/// on its layer lie apart, seen from viewpoints of the view cell.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct ParallaxCheck {
+    /// The job's error budget, pixels.
+    pub max_error_px: f64,
+    /// Impostors checked.
+    pub impostors: u64,
+    /// Sphere points per impostor, each seen from every sampled viewpoint.
+    pub points: u32,
+    /// Viewpoints per impostor.
+    pub viewpoints: u32,
+    /// Largest error over all impostors, pixels.
+    pub max_px: f64,
+    /// Mean over impostors of their largest error, pixels.
+    pub mean_px: f64,
+    /// Impostors whose largest error exceeds the budget.
+    pub over_budget: u64,
+    /// Impostors whose largest error exceeds 1.5 times the budget.
+    pub over_budget_1_5: u64,
+    /// The impostor with the largest error.
+    pub worst_impostor: u32,
+}
+
+/// Sphere points and viewpoints per impostor of the parallax check.
+const PARALLAX_SAMPLES: u32 = 32;
+
+/// Checks the parallax of every impostor of `placement` (deterministic:
+/// each impostor's samples are seeded by `seed` and its id).
+pub fn parallax_check(job: &Job, placement: &Placement, seed: u64) -> Option<ParallaxCheck> {
+    if placement.impostors.is_empty() {
+        return None;
+    }
+    let theta = job.pixel_angle();
+    let errs: Vec<f64> = placement
+        .impostors
+        .par_iter()
+        .map(|imp| {
+            let mut rng = Rng::new(seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) ^ u64::from(imp.id));
+            crate::bake::parallax(imp, &mut rng, PARALLAX_SAMPLES, PARALLAX_SAMPLES) / theta
+        })
+        .collect();
+    let budget = job.max_error_px;
+    let (worst, max_px) =
+        errs.iter().enumerate().fold(
+            (0, 0.0f64),
+            |(wi, wm), (i, &e)| if e > wm { (i, e) } else { (wi, wm) },
+        );
+    Some(ParallaxCheck {
+        max_error_px: budget,
+        impostors: errs.len() as u64,
+        points: PARALLAX_SAMPLES,
+        viewpoints: PARALLAX_SAMPLES,
+        max_px,
+        mean_px: errs.iter().sum::<f64>() / errs.len() as f64,
+        over_budget: errs.iter().filter(|&&e| e > budget).count() as u64,
+        over_budget_1_5: errs.iter().filter(|&&e| e > 1.5 * budget).count() as u64,
+        worst_impostor: placement.impostors[worst].id,
+    })
 }
 
 struct PreparedImpostor {
@@ -677,6 +743,7 @@ pub fn evaluate_shared(
         },
         image: None,
         visibility,
+        parallax: parallax_check(job, placement, opts.seed),
     })
 }
 

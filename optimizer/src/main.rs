@@ -436,6 +436,19 @@ fn run(cli: Cli) -> Result<ExitCode> {
                     v.rays
                 );
             }
+            if let Some(x) = &eval.parallax {
+                eprintln!(
+                    "parallax of {} impostors: max {:.2} px (impostor {}), mean {:.2} px, \
+                     {} over the {} px budget ({} over 1.5 times it)",
+                    x.impostors,
+                    x.max_px,
+                    x.worst_impostor,
+                    x.mean_px,
+                    x.over_budget,
+                    x.max_error_px,
+                    x.over_budget_1_5
+                );
+            }
             if images > 0 {
                 let geom = geometry::load_geometry_file(&scene_path)?;
                 let layers = match &impostors {

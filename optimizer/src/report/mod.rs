@@ -134,6 +134,10 @@ pub struct EvalSummary {
     pub violations_in_solved: u64,
     /// Largest view time among views in solved problem views or in none, ms.
     pub max_ms_in_solved: f64,
+    /// Largest measured parallax of an impostor, pixels (none without
+    /// impostors).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub parallax_max_px: Option<f64>,
 }
 
 impl From<&crate::evaluate::Evaluation> for EvalSummary {
@@ -147,6 +151,7 @@ impl From<&crate::evaluate::Evaluation> for EvalSummary {
             violations: e.violations,
             violations_in_solved: e.violations_in_solved,
             max_ms_in_solved: e.max_ms_in_solved,
+            parallax_max_px: e.parallax.as_ref().map(|p| p.max_px),
         }
     }
 }

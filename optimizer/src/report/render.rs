@@ -735,10 +735,10 @@ impl<'a> Page<'a> {
              <th>CPVs</th><th>candidates</th><th>impostors</th><th>memory (MB)</th>\
              <th>unsolved CPVs</th><th>preprocessing (s)</th><th>eval max (ms)</th>\
              <th>eval p99 (ms)</th><th>max in solved (ms)</th><th>violations in solved</th>\
-             <th>status</th></tr>\n",
+             <th>parallax max (px)</th><th>status</th></tr>\n",
         );
         if self.r.runs.is_empty() {
-            h.push_str("<tr><td colspan=\"14\">No runs.</td></tr>\n");
+            h.push_str("<tr><td colspan=\"15\">No runs.</td></tr>\n");
         }
         for x in &self.r.runs {
             let e = x.eval.as_ref();
@@ -753,7 +753,7 @@ impl<'a> Page<'a> {
                  <td class=\"n\">{}</td><td class=\"n\">{}</td><td class=\"n\">{:.3}</td>\
                  <td class=\"n{}\">{}</td><td class=\"n\">{:.3}</td><td class=\"n\">{}</td>\
                  <td class=\"n\">{}</td><td class=\"n\">{}</td><td class=\"n{}\">{}</td>\
-                 <td{}>{}</td></tr>",
+                 <td class=\"n\">{}</td><td{}>{}</td></tr>",
                 esc(&x.method),
                 esc(&setting(x)),
                 x.target_frame_time_ms,
@@ -769,6 +769,9 @@ impl<'a> Page<'a> {
                 ms(|e| e.max_ms_in_solved),
                 if bad_viol { " bad" } else { "" },
                 viol,
+                e.and_then(|e| e.parallax_max_px)
+                    .filter(|v| v.is_finite())
+                    .map_or("–".to_string(), |v| format!("{v:.2}")),
                 if x.status == "ok" {
                     ""
                 } else {
@@ -779,7 +782,7 @@ impl<'a> Page<'a> {
             if let Some(err) = &x.error {
                 let _ = writeln!(
                     h,
-                    "<tr class=\"error\"><td></td><td colspan=\"13\">error: {}</td></tr>",
+                    "<tr class=\"error\"><td></td><td colspan=\"14\">error: {}</td></tr>",
                     esc(err)
                 );
             }

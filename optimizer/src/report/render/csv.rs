@@ -4,7 +4,7 @@
 use crate::report::{Report, Run};
 
 /// Header of `runs.csv`.
-const RUNS_HEADER: [&str; 21] = [
+const RUNS_HEADER: [&str; 22] = [
     "method",
     "knob",
     "value",
@@ -26,6 +26,7 @@ const RUNS_HEADER: [&str; 21] = [
     "eval_violations",
     "eval_violations_in_solved",
     "eval_max_ms_in_solved",
+    "eval_parallax_max_px",
 ];
 
 /// The report's data as CSV files, `(file name, contents)`: `runs.csv` (one
@@ -83,8 +84,9 @@ fn runs_csv(runs: &[Run]) -> String {
                 e.violations.to_string(),
                 e.violations_in_solved.to_string(),
                 e.max_ms_in_solved.to_string(),
+                e.parallax_max_px.map(|x| x.to_string()).unwrap_or_default(),
             ]),
-            None => fields.extend(std::iter::repeat_n(String::new(), 8)),
+            None => fields.extend(std::iter::repeat_n(String::new(), 9)),
         }
         row(&mut out, fields);
     }
