@@ -182,3 +182,63 @@ fn placement_of_another_scene_is_rejected() {
     assert_eq!(code(&o), 2, "{}", stderr(&o));
     assert!(stderr(&o).contains("object id 42"), "{}", stderr(&o));
 }
+
+#[test]
+fn impossible_view_cells_are_rejected() {
+    let dir = tmp("viewcells");
+    let scene = dir.join("tri.glb");
+    std::fs::write(
+        &scene,
+        triangle_glb([0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, 0.0]),
+    )
+    .unwrap();
+    let job = dir.join("job.json");
+    std::fs::write(&job, job_json("")).unwrap();
+    let cases = [
+        (
+            r#"{"shaft":{"apex":[0,0,0],"axis":[0,0,0],"half_angle_deg":10,"min_distance":50}}"#,
+            1,
+            "axis non-zero",
+        ),
+        (
+            r#"{"shaft":{"apex":[0,0,0],"axis":[0,0,1],"half_angle_deg":0,"min_distance":50}}"#,
+            1,
+            "half_angle_deg",
+        ),
+        (
+            r#"{"shaft":{"apex":[0,0,0],"axis":[0,0,1],"half_angle_deg":10,"min_distance":1}}"#,
+            1,
+            "may not meet the cluster",
+        ),
+        (r#"{"box":{"min":[0,0,0],"max":[-1,1,1]}}"#, 1, "min ≤ max"),
+        (
+            r#"{"box":{"min":[10,0,0],"max":[11,1,1]}}"#,
+            0,
+            "layers (0)",
+        ),
+    ];
+    for (k, (cell, layers, needle)) in cases.iter().enumerate() {
+        let placement = dir.join(format!("p{k}.json"));
+        std::fs::write(
+            &placement,
+            format!(
+                r#"{{"summary":{{"cpvs":0,"candidates":0,"impostors":1,"memory_bytes":1,"unsolved_cpvs":0,"target_frame_time_ms":16}},
+                   "impostors":[{{"id":0,"node":0,"objects":[0],"sphere":{{"center":[0.3,0.3,0],"radius":2}},
+                   "view_cell":{cell},"layers":{layers},"resolution":4,"memory_bytes":1,"time_ms":0}}],"cpvs":[]}}"#
+            ),
+        )
+        .unwrap();
+        let o = run(&[
+            "evaluate",
+            s(&scene),
+            "--job",
+            s(&job),
+            "--placement",
+            s(&placement),
+            "--views",
+            "10",
+        ]);
+        assert_eq!(code(&o), 2, "case {k}: {}", stderr(&o));
+        assert!(stderr(&o).contains(needle), "case {k}: {}", stderr(&o));
+    }
+}

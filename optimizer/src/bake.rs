@@ -251,6 +251,12 @@ fn check_objects(geom: &SceneGeometry, placement: &Placement, source: &str) -> R
                 "must be positive and finite",
             ));
         }
+        if let Err((field, problem)) = imp.check_view_cell() {
+            return Err(Error::bad(
+                format!("{source}: impostors[{}].{field}", imp.id),
+                problem,
+            ));
+        }
     }
     Ok(())
 }

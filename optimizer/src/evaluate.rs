@@ -270,6 +270,18 @@ fn prepare(scene: &Scene, job: &Job, placement: &Placement, source: &str) -> Res
                 ));
             }
         }
+        if imp.layers == 0 || imp.resolution == 0 {
+            return Err(Error::bad(
+                what,
+                format!(
+                    "layers ({}) and resolution ({}) must be positive",
+                    imp.layers, imp.resolution
+                ),
+            ));
+        }
+        if let Err((field, problem)) = imp.check_view_cell() {
+            return Err(Error::bad(format!("{what}.{field}"), problem));
+        }
         let cell = match imp.view_cell {
             ViewCellJson::Shaft {
                 apex,

@@ -93,6 +93,57 @@ pub struct PlacedImpostor {
     pub time_ms: f64,
 }
 
+impl PlacedImpostor {
+    /// Checks that the view cell can be a view cell of this impostor: finite,
+    /// a shaft with a non-zero axis, a half-angle in (0°, 180°] and a
+    /// minimum distance beyond the cluster's sphere, a box with
+    /// `min ≤ max`. `Err((field, problem))`.
+    pub fn check_view_cell(&self) -> Result<(), (&'static str, String)> {
+        match self.view_cell {
+            ViewCellJson::Shaft {
+                apex,
+                axis,
+                half_angle_deg,
+                min_distance,
+            } => {
+                let finite = apex.iter().chain(&axis).all(|x| x.is_finite());
+                if !finite || axis.iter().all(|&x| x == 0.0) {
+                    return Err((
+                        "view_cell.shaft",
+                        "apex and axis must be finite and the axis non-zero".into(),
+                    ));
+                }
+                if !(half_angle_deg > 0.0 && half_angle_deg <= 180.0) {
+                    return Err((
+                        "view_cell.shaft.half_angle_deg",
+                        format!("{half_angle_deg} must be in (0, 180]"),
+                    ));
+                }
+                if !(min_distance.is_finite() && min_distance > self.sphere.radius) {
+                    return Err((
+                        "view_cell.shaft.min_distance",
+                        format!(
+                            "{min_distance} must exceed the cluster's radius {} (the view cell may not meet the cluster)",
+                            self.sphere.radius
+                        ),
+                    ));
+                }
+            }
+            ViewCellJson::Box { min, max } => {
+                let ok =
+                    (0..3).all(|a| min[a].is_finite() && max[a].is_finite() && min[a] <= max[a]);
+                if !ok {
+                    return Err((
+                        "view_cell.box",
+                        "corners must be finite with min ≤ max on every axis".into(),
+                    ));
+                }
+            }
+        }
+        Ok(())
+    }
+}
+
 /// A 3D region.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
