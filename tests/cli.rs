@@ -102,3 +102,43 @@ fn summary_scene_places_like_the_glb() {
     assert_eq!(code(&o1), code(&o2));
     assert_same_file(&a, &b);
 }
+
+#[test]
+fn outputs_go_through_links_and_into_pipes_without_replacing_them() {
+    use std::os::unix::fs::FileTypeExt;
+    let dir = tmp("outputs");
+    // A symbolic link stays a link; its target gets the output.
+    let target = dir.join("summary.json");
+    let link = dir.join("link.json");
+    std::os::unix::fs::symlink("summary.json", &link).unwrap();
+    let o = run(&["gen-city", "--scale", "0.01", "--summary", "-o", s(&link)]);
+    assert_eq!(code(&o), 0, "{}", stderr(&o));
+    assert!(
+        std::fs::symlink_metadata(&link)
+            .unwrap()
+            .file_type()
+            .is_symlink()
+    );
+    assert!(
+        read_json(&target)["objects"]
+            .as_array()
+            .is_some_and(|a| !a.is_empty())
+    );
+    // A named pipe (like /dev/null, not a regular file) is written into,
+    // not replaced.
+    let fifo = dir.join("pipe");
+    let made = std::process::Command::new("mkfifo").arg(&fifo).status();
+    if !made.is_ok_and(|st| st.success()) {
+        eprintln!("mkfifo unavailable: pipe case skipped");
+        return;
+    }
+    let reader = {
+        let fifo = fifo.clone();
+        std::thread::spawn(move || std::fs::read(&fifo).unwrap())
+    };
+    let o = run(&["gen-city", "--scale", "0.01", "--summary", "-o", s(&fifo)]);
+    assert_eq!(code(&o), 0, "{}", stderr(&o));
+    let bytes = reader.join().unwrap();
+    assert_eq!(bytes, std::fs::read(&target).unwrap());
+    assert!(std::fs::metadata(&fifo).unwrap().file_type().is_fifo());
+}

@@ -219,6 +219,34 @@ fn write_output(path: Option<&Path>, bytes: &[u8]) -> Result<()> {
             .write_all(bytes)
             .map_err(|e| Error::io("<stdout>", e)),
         Some(p) => {
+            // Through a symbolic link to its target; into anything that is
+            // not a regular file (a device such as /dev/null, a pipe) write
+            // directly: replacing it would destroy it.
+            let mut resolved = p.to_path_buf();
+            for _ in 0..32 {
+                match std::fs::read_link(&resolved) {
+                    Ok(target) => {
+                        resolved = match resolved.parent() {
+                            Some(dir) if target.is_relative() => dir.join(target),
+                            _ => target,
+                        }
+                    }
+                    Err(_) => break,
+                }
+            }
+            let p = resolved.as_path();
+            if let Ok(m) = std::fs::metadata(p) {
+                if m.is_dir() {
+                    return Err(Error::bad(p.display().to_string(), "is a directory"));
+                }
+                if !m.is_file() {
+                    return std::fs::OpenOptions::new()
+                        .write(true)
+                        .open(p)
+                        .and_then(|mut f| f.write_all(bytes))
+                        .map_err(|e| Error::io(p, e));
+                }
+            }
             let dir = p
                 .parent()
                 .filter(|d| !d.as_os_str().is_empty())
