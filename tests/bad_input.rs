@@ -150,9 +150,8 @@ fn missing_files_and_bad_arguments() {
     assert!(stderr(&o).contains("--threads"), "{}", stderr(&o));
 }
 
-#[test]
-fn placement_of_another_scene_is_rejected() {
-    let dir = tmp("mismatch");
+/// Runs `evaluate` on a one-triangle scene with the given placement JSON.
+fn evaluate_placement(dir: &Path, name: &str, placement_json: &str) -> std::process::Output {
     let scene = dir.join("tri.glb");
     std::fs::write(
         &scene,
@@ -161,15 +160,9 @@ fn placement_of_another_scene_is_rejected() {
     .unwrap();
     let job = dir.join("job.json");
     std::fs::write(&job, job_json("")).unwrap();
-    let placement = dir.join("p.json");
-    std::fs::write(
-        &placement,
-        r#"{"summary":{"cpvs":0,"candidates":0,"impostors":1,"memory_bytes":1,"unsolved_cpvs":0,"target_frame_time_ms":16},
-           "impostors":[{"id":0,"node":0,"objects":[42],"sphere":{"center":[0,0,0],"radius":1},
-           "view_cell":{"box":{"min":[0,0,0],"max":[1,1,1]}},"layers":1,"resolution":4,"memory_bytes":1,"time_ms":0}],"cpvs":[]}"#,
-    )
-    .unwrap();
-    let o = run(&[
+    let placement = dir.join(name);
+    std::fs::write(&placement, placement_json).unwrap();
+    run(&[
         "evaluate",
         s(&scene),
         "--job",
@@ -178,7 +171,18 @@ fn placement_of_another_scene_is_rejected() {
         s(&placement),
         "--views",
         "10",
-    ]);
+    ])
+}
+
+#[test]
+fn placement_of_another_scene_is_rejected() {
+    let o = evaluate_placement(
+        &tmp("mismatch"),
+        "p.json",
+        r#"{"summary":{"cpvs":0,"candidates":0,"impostors":1,"memory_bytes":1,"unsolved_cpvs":0,"target_frame_time_ms":16},
+           "impostors":[{"id":0,"node":0,"objects":[42],"sphere":{"center":[0,0,0],"radius":1},
+           "view_cell":{"box":{"min":[0,0,0],"max":[1,1,1]}},"layers":1,"resolution":4,"memory_bytes":1,"time_ms":0}],"cpvs":[]}"#,
+    );
     assert_eq!(code(&o), 2, "{}", stderr(&o));
     assert!(stderr(&o).contains("object id 42"), "{}", stderr(&o));
 }
@@ -186,14 +190,6 @@ fn placement_of_another_scene_is_rejected() {
 #[test]
 fn impossible_view_cells_are_rejected() {
     let dir = tmp("viewcells");
-    let scene = dir.join("tri.glb");
-    std::fs::write(
-        &scene,
-        triangle_glb([0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, 0.0]),
-    )
-    .unwrap();
-    let job = dir.join("job.json");
-    std::fs::write(&job, job_json("")).unwrap();
     let cases = [
         (
             r#"{"shaft":{"apex":[0,0,0],"axis":[0,0,0],"half_angle_deg":10,"min_distance":50}}"#,
@@ -218,26 +214,15 @@ fn impossible_view_cells_are_rejected() {
         ),
     ];
     for (k, (cell, layers, needle)) in cases.iter().enumerate() {
-        let placement = dir.join(format!("p{k}.json"));
-        std::fs::write(
-            &placement,
-            format!(
+        let o = evaluate_placement(
+            &dir,
+            &format!("p{k}.json"),
+            &format!(
                 r#"{{"summary":{{"cpvs":0,"candidates":0,"impostors":1,"memory_bytes":1,"unsolved_cpvs":0,"target_frame_time_ms":16}},
                    "impostors":[{{"id":0,"node":0,"objects":[0],"sphere":{{"center":[0.3,0.3,0],"radius":2}},
                    "view_cell":{cell},"layers":{layers},"resolution":4,"memory_bytes":1,"time_ms":0}}],"cpvs":[]}}"#
             ),
-        )
-        .unwrap();
-        let o = run(&[
-            "evaluate",
-            s(&scene),
-            "--job",
-            s(&job),
-            "--placement",
-            s(&placement),
-            "--views",
-            "10",
-        ]);
+        );
         assert_eq!(code(&o), 2, "case {k}: {}", stderr(&o));
         assert!(stderr(&o).contains(needle), "case {k}: {}", stderr(&o));
     }
