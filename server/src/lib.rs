@@ -426,6 +426,9 @@ impl AppState {
             .map_err(|e| optimizer::Error::Internal(e.to_string()))?;
         summary["max_ms"] = json!(eval.max_ms);
         summary["violations_in_solved"] = json!(eval.violations_in_solved);
+        if let Some(x) = &eval.parallax {
+            summary["parallax_max_px"] = json!(x.max_px);
+        }
         summary["seconds"] = serde_json::to_value(&out.stats.seconds)
             .map_err(|e| optimizer::Error::Internal(e.to_string()))?;
         Ok(summary.to_string())

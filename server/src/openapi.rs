@@ -67,7 +67,7 @@ pub fn openapi() -> Value {
             "progress": {"type": "number", "minimum": 0, "maximum": 1},
             "bake": {"type": "boolean"},
             "created_ms": {"type": "integer"}, "started_ms": {"type": ["integer", "null"]}, "finished_ms": {"type": ["integer", "null"]},
-            "summary": {"description": "the placement summary with the evaluation's max_ms and violations_in_solved and the stage timings, once succeeded"},
+            "summary": {"description": "the placement summary with the evaluation's max_ms, violations_in_solved and parallax_max_px (when there are impostors) and the stage timings, once succeeded"},
             "error": {"type": ["string", "null"]}
         }
     }));

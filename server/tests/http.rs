@@ -147,6 +147,12 @@ async fn summary_and_glb_jobs_succeed_with_the_cli_bytes() {
         let (s, e) = get_json(addr, &format!("/v1/jobs/{id}/evaluation")).await;
         assert_eq!(s, 200);
         assert_eq!(e["violations_in_solved"], 0, "{e}");
+        if v["summary"]["impostors"].as_u64().unwrap() > 0 {
+            assert_eq!(
+                v["summary"]["parallax_max_px"], e["parallax"]["max_px"],
+                "{v}"
+            );
+        }
     }
     let (s, _) = get_json(addr, &format!("/v1/jobs/{id1}/impostors.glb")).await;
     assert_eq!(s, 404, "job 1 did not ask for baking");
