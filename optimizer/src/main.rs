@@ -222,31 +222,46 @@ fn write_output(path: Option<&Path>, bytes: &[u8]) -> Result<()> {
             // Through a symbolic link to its target; into anything that is
             // not a regular file (a device such as /dev/null, a pipe) write
             // directly: replacing it would destroy it.
-            let mut resolved = p.to_path_buf();
-            for _ in 0..32 {
-                match std::fs::read_link(&resolved) {
-                    Ok(target) => {
-                        resolved = match resolved.parent() {
-                            Some(dir) if target.is_relative() => dir.join(target),
-                            _ => target,
-                        }
-                    }
-                    Err(_) => break,
-                }
+            // Special files (/dev/stdout, /dev/null, /proc/self/fd/N) are
+            // written into, whatever they lead to.
+            if p.starts_with("/dev") || p.starts_with("/proc") {
+                return std::fs::OpenOptions::new()
+                    .append(true)
+                    .open(p)
+                    .and_then(|mut f| f.write_all(bytes))
+                    .map_err(|e| Error::io(p, e));
             }
-            let p = resolved.as_path();
-            if let Ok(m) = std::fs::metadata(p) {
-                if m.is_dir() {
+            let resolved = match std::fs::metadata(p) {
+                Ok(m) if m.is_dir() => {
                     return Err(Error::bad(p.display().to_string(), "is a directory"));
                 }
-                if !m.is_file() {
+                Ok(m) if !m.is_file() => {
                     return std::fs::OpenOptions::new()
                         .write(true)
                         .open(p)
                         .and_then(|mut f| f.write_all(bytes))
                         .map_err(|e| Error::io(p, e));
                 }
-            }
+                Ok(_) => std::fs::canonicalize(p).unwrap_or_else(|_| p.to_path_buf()),
+                // Not there yet: a dangling link is followed to where its
+                // target will be.
+                Err(_) => {
+                    let mut r = p.to_path_buf();
+                    for _ in 0..32 {
+                        match std::fs::read_link(&r) {
+                            Ok(target) => {
+                                r = match r.parent() {
+                                    Some(dir) if target.is_relative() => dir.join(target),
+                                    _ => target,
+                                }
+                            }
+                            Err(_) => break,
+                        }
+                    }
+                    r
+                }
+            };
+            let p = resolved.as_path();
             let dir = p
                 .parent()
                 .filter(|d| !d.as_os_str().is_empty())
