@@ -124,6 +124,17 @@ fn outputs_go_through_links_and_into_pipes_without_replacing_them() {
             .as_array()
             .is_some_and(|a| !a.is_empty())
     );
+    // /dev/stdout is written into (here a pipe to this test).
+    let o = run(&[
+        "gen-city",
+        "--scale",
+        "0.01",
+        "--summary",
+        "-o",
+        "/dev/stdout",
+    ]);
+    assert_eq!(code(&o), 0, "{}", stderr(&o));
+    assert_eq!(o.stdout, std::fs::read(&target).unwrap());
     // A named pipe (like /dev/null, not a regular file) is written into,
     // not replaced.
     let fifo = dir.join("pipe");
