@@ -22,7 +22,7 @@ use crate::geom::{Aabb, Sphere, enclosing_cone, face_coords};
 use crate::impostor_model::ImpostorModel;
 use crate::job::Job;
 use crate::placement::{PlacedImpostor, SphereJson, ViewCellJson};
-use crate::problem_views::{Context, ProblemViews, RegionCosts};
+use crate::problem_views::{Context, ProblemViews, RegionCosts, enclosed_cost};
 use crate::visibility::ObjectSet;
 
 /// The impostors of one environment-map cell.
@@ -139,39 +139,6 @@ fn cell_maps(ctx: &Context, job: &Job, aabb: Aabb, visible: Option<&ObjectSet>) 
     CellMaps { impostors, aabb }
 }
 
-/// Cost of the objects in `cone` that are not in `skip`.
-fn cone_cost_without(
-    ctx: &Context,
-    costs: &RegionCosts,
-    cone: &crate::geom::Cone,
-    skip: &ObjectSet,
-) -> Cost {
-    let h = ctx.hierarchy;
-    let mut total = Cost::default();
-    let mut stack = vec![0u32];
-    while let Some(n) = stack.pop() {
-        let node = &h.nodes[n as usize];
-        if !cone.intersects_sphere(node.sphere.center, node.sphere.radius) {
-            continue;
-        }
-        match node.children {
-            Some([l, r]) => {
-                stack.push(r);
-                stack.push(l);
-            }
-            None => {
-                for &o in h.objects(n) {
-                    let s = &h.object_spheres[o as usize];
-                    if !skip.contains(o) && cone.intersects_sphere(s.center, s.radius) {
-                        total += costs.objects[o as usize];
-                    }
-                }
-            }
-        }
-    }
-    total
-}
-
 /// The environment-map placement: impostors, and per CPV its impostors'
 /// ids and its cost with them.
 pub struct EnvMapPlacement {
@@ -240,17 +207,20 @@ pub fn place(ctx: &Context, job: &Job, pv: &ProblemViews) -> EnvMapPlacement {
         .map(|cpv| {
             let b = block_of(pv.kd[cpv.kd as usize].lo);
             let ids: Vec<u32> = (first[b]..first[b + 1]).collect();
-            let mut skip = ObjectSet::new(n_obj);
+            // The geometry still drawn: visible and in no environment map.
+            let kd = &pv.kd[cpv.kd as usize];
+            let mut drawn = match ctx.visibility.and_then(|v| v.region(kd.lo, kd.hi)) {
+                Some(v) => (*v).clone(),
+                None => ObjectSet::full(n_obj),
+            };
             for &i in &ids {
                 for &o in &impostors[i as usize].objects {
-                    skip.insert(o);
+                    drawn.remove(o);
                 }
             }
-            let kd = &pv.kd[cpv.kd as usize];
-            let visible = ctx.visibility.and_then(|v| v.region(kd.lo, kd.hi));
-            let costs = RegionCosts::new(ctx, &cpv.region, visible.as_deref());
+            let costs = RegionCosts::new(ctx, &cpv.region, Some(&drawn));
             let cone = enclosing_cone(&cpv.region, &cpv.vdi, ctx.half_diagonal);
-            let mut cost = cone_cost_without(ctx, &costs, &cone, &skip);
+            let mut cost = enclosed_cost(ctx, &costs, &cone, &cpv.region, None);
             for &i in &ids {
                 let s = &impostors[i as usize].sphere;
                 let center = DVec3::from_array(s.center);

@@ -52,6 +52,25 @@ pub struct EvalOptions {
     pub check_objects: u32,
 }
 
+impl EvalOptions {
+    /// Checks the sample counts.
+    pub fn check(&self) -> Result<()> {
+        if self.views == 0 || self.views > 100_000_000 {
+            return Err(Error::bad(
+                "--views",
+                format!("{} must be between 1 and 100000000", self.views),
+            ));
+        }
+        if self.check_rays > 1_000_000 || self.check_objects > 100_000 {
+            return Err(Error::bad(
+                "--check-rays/--check-objects",
+                "at most 1000000 rays and 100000 objects per view",
+            ));
+        }
+        Ok(())
+    }
+}
+
 impl Default for EvalOptions {
     fn default() -> Self {
         EvalOptions {
@@ -413,37 +432,28 @@ fn view_time(
 ) -> f64 {
     let eye = f.eye();
     let mut cost = Cost::default();
-    let mut stack = vec![0u32];
-    while let Some(n) = stack.pop() {
-        let node = &h.nodes[n as usize];
+    h.walk(|n, node| {
         if !f.intersects_sphere(node.sphere.center, node.sphere.radius) {
-            continue;
+            return false;
         }
-        match node.children {
-            Some([l, r]) => {
-                stack.push(r);
-                stack.push(l);
-            }
-            None => {
-                for &o in h.objects(n) {
-                    let s = &h.object_spheres[o as usize];
-                    if replaced.binary_search(&o).is_ok()
-                        || !f.intersects_sphere(s.center, s.radius)
-                    {
-                        continue;
-                    }
-                    if visible.is_some_and(|v| !v.contains(o)) {
-                        if let Some(c) = culled.as_deref_mut() {
-                            c.push((eye.distance(s.center) - s.radius, o));
-                        }
-                        continue;
-                    }
-                    let ob = &scene.objects[o as usize];
-                    cost += model.object_view(ob, s.radius, eye.distance(s.center));
+        if node.children.is_none() {
+            for &o in h.objects(n) {
+                let s = &h.object_spheres[o as usize];
+                if replaced.binary_search(&o).is_ok() || !f.intersects_sphere(s.center, s.radius) {
+                    continue;
                 }
+                if visible.is_some_and(|v| !v.contains(o)) {
+                    if let Some(c) = culled.as_deref_mut() {
+                        c.push((eye.distance(s.center) - s.radius, o));
+                    }
+                    continue;
+                }
+                let ob = &scene.objects[o as usize];
+                cost += model.object_view(ob, s.radius, eye.distance(s.center));
             }
         }
-    }
+        true
+    });
     for &i in impostors {
         let imp = &prepared.impostors[i as usize];
         let s = imp.sphere;
@@ -546,18 +556,7 @@ pub fn evaluate_input(
     opts: &EvalOptions,
     source: &str,
 ) -> Result<Evaluation> {
-    if opts.views == 0 || opts.views > 100_000_000 {
-        return Err(Error::bad(
-            "--views",
-            format!("{} must be between 1 and 100000000", opts.views),
-        ));
-    }
-    if opts.check_rays > 1_000_000 || opts.check_objects > 100_000 {
-        return Err(Error::bad(
-            "--check-rays/--check-objects",
-            "at most 1000000 rays and 100000 objects per view",
-        ));
-    }
+    opts.check()?;
     let scene = &input.scene;
     let h = Hierarchy::build(scene);
     let vis = Visibility::new(job, scene, &h, input.visibility_inputs(job))?;
@@ -594,12 +593,7 @@ pub fn evaluate_shared(
     source: &str,
     shared: &Shared,
 ) -> Result<Evaluation> {
-    if opts.views == 0 || opts.views > 100_000_000 {
-        return Err(Error::bad(
-            "--views",
-            format!("{} must be between 1 and 100000000", opts.views),
-        ));
-    }
+    opts.check()?;
     let scene = &input.scene;
     let prepared = prepare(scene, job, placement, source)?;
     let h = shared.hierarchy;

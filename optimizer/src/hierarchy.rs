@@ -185,6 +185,23 @@ impl Hierarchy {
         &self.order[s as usize..e as usize]
     }
 
+    /// Visits the nodes depth first, left before right, from the root:
+    /// `f(id, node)` is called for every node reached and says whether to go
+    /// into its children (ignored for leaves, whose objects the caller reads
+    /// with [`Hierarchy::objects`]).
+    pub fn walk(&self, mut f: impl FnMut(u32, &Node) -> bool) {
+        let mut stack = vec![0u32];
+        while let Some(n) = stack.pop() {
+            let node = &self.nodes[n as usize];
+            if f(n, node)
+                && let Some([l, r]) = node.children
+            {
+                stack.push(r);
+                stack.push(l);
+            }
+        }
+    }
+
     /// True when `d` is a strict descendant of `a`.
     pub fn is_descendant(&self, d: u32, a: u32) -> bool {
         d > a && d < self.nodes[a as usize].subtree_end

@@ -460,6 +460,19 @@ mod tests {
     use crate::job::Method;
     use crate::testutil::{synthetic_city, synthetic_job};
 
+    /// The impostors of CPV `c` represent no object twice.
+    fn assert_no_object_twice(p: &Placement, c: &crate::placement::PlacedCpv, what: &str) {
+        let mut objs: Vec<u32> = c
+            .impostors
+            .iter()
+            .flat_map(|&i| p.impostors[i as usize].objects.clone())
+            .collect();
+        let n = objs.len();
+        objs.sort_unstable();
+        objs.dedup();
+        assert_eq!(n, objs.len(), "{what}");
+    }
+
     fn run(threads: usize, seed: u64) -> Placement {
         let scene = synthetic_city(seed, 5, 5);
         let job = synthetic_job(5, 5);
@@ -511,15 +524,7 @@ mod tests {
             }
             // Every CPV's impostors are an antichain: no object twice.
             for c in &p.cpvs {
-                let mut objs: Vec<u32> = c
-                    .impostors
-                    .iter()
-                    .flat_map(|&i| p.impostors[i as usize].objects.clone())
-                    .collect();
-                let n = objs.len();
-                objs.sort_unstable();
-                objs.dedup();
-                assert_eq!(n, objs.len());
+                assert_no_object_twice(p, c, "");
                 assert_eq!(c.solved, c.time_ms_final <= job.target_frame_time_ms);
                 assert!(c.time_ms_final <= c.time_ms_original);
             }
@@ -657,15 +662,7 @@ mod tests {
             assert_eq!(eval.impostors_outside_view_cell, 0, "{m:?}");
             // No object twice in one CPV.
             for c in &p.cpvs {
-                let mut objs: Vec<u32> = c
-                    .impostors
-                    .iter()
-                    .flat_map(|&i| p.impostors[i as usize].objects.clone())
-                    .collect();
-                let n = objs.len();
-                objs.sort_unstable();
-                objs.dedup();
-                assert_eq!(n, objs.len(), "{m:?}");
+                assert_no_object_twice(&p, c, &format!("{m:?}"));
             }
             memory.push((m, p.summary.memory_bytes));
         }

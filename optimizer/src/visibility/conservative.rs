@@ -769,36 +769,29 @@ fn mark_visible(
     hidden: &mut [u32],
 ) {
     let meets = |b: &Aabb| b.min.cmple(cell.max).all() && cell.min.cmple(b.max).all();
-    let mut stack = vec![0u32];
-    while let Some(n) = stack.pop() {
-        let node = &h.nodes[n as usize];
+    h.walk(|n, node| {
         if hidden[n as usize] == 0 || (!meets(&node.aabb) && hz.hides(&node.aabb)) {
-            continue;
+            return false;
         }
-        match node.children {
-            Some([l, r]) => {
-                stack.push(r);
-                stack.push(l);
-            }
-            None => {
-                for &o in h.objects(n) {
-                    if visible.contains(o) {
-                        continue;
-                    }
-                    let ob = &scene.objects[o as usize];
-                    let b = Aabb::new(ob.min, ob.max);
-                    if meets(&b) || !hz.hides(&b) {
-                        visible.insert(o);
-                        let mut k = n;
-                        while k != u32::MAX {
-                            hidden[k as usize] -= 1;
-                            k = h.nodes[k as usize].parent;
-                        }
+        if node.children.is_none() {
+            for &o in h.objects(n) {
+                if visible.contains(o) {
+                    continue;
+                }
+                let ob = &scene.objects[o as usize];
+                let b = Aabb::new(ob.min, ob.max);
+                if meets(&b) || !hz.hides(&b) {
+                    visible.insert(o);
+                    let mut k = n;
+                    while k != u32::MAX {
+                        hidden[k as usize] -= 1;
+                        k = h.nodes[k as usize].parent;
                     }
                 }
             }
         }
-    }
+        true
+    });
 }
 
 #[cfg(test)]

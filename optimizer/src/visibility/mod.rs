@@ -84,6 +84,14 @@ impl ObjectSet {
         }
     }
 
+    /// Takes `o` out (ignored when out of range).
+    #[inline]
+    pub fn remove(&mut self, o: u32) {
+        if let Some(w) = self.words.get_mut(o as usize / 64) {
+            *w &= !(1 << (o % 64));
+        }
+    }
+
     /// Adds every member of `other`.
     pub fn union_with(&mut self, other: &ObjectSet) {
         for (a, b) in self.words.iter_mut().zip(&other.words) {
