@@ -2,11 +2,11 @@
 //!
 //! A candidate is a cluster (hierarchy node) with a view cell: a shaft around
 //! the cluster centre (apex angle, axis on an angular grid, minimum distance
-//! `size·2^k`) or a box of the 3D view space hierarchy. Only candidates that
-//! serve at least one CPV — the CPV's region lies inside the view cell, the
-//! cluster meets the CPV's enclosing frustum and its impostor is cheaper than
-//! its geometry there — and whose view cell does not meet the cluster are
-//! kept.
+//! `size·2^(k/steps)`) or a box of the 3D view space hierarchy. Only
+//! candidates that serve at least one CPV — the CPV's region lies inside the
+//! view cell, the cluster meets the CPV's enclosing frustum and its impostor
+//! is cheaper than its geometry there — and whose view cell does not meet
+//! the cluster are kept.
 //!
 //! Enumeration is output-sensitive: it starts from the (CPV, cluster) pairs
 //! recorded by the problem view approximation, not from all shafts × all
@@ -14,6 +14,15 @@
 //! `d_k` serves exactly the CPVs at distance ≥ `d_k`, so only the largest
 //! `d_k` below some CPV's distance is generated: a smaller one that serves
 //! no additional CPV would cost more memory for the same service.
+//!
+//! Each shaft is then fitted to the cells it serves: it starts at the
+//! nearest of them and narrows to the smallest cone around their corners
+//! (Welzl's algorithm on spherical caps, one pass for all the nested
+//! candidates of an angle and axis). The grid decides which cells a shaft
+//! serves; the fit makes it no larger than those cells need. The paper
+//! doubles the minimum distance from step to step (`min_distance_steps` 1);
+//! the default takes four steps per doubling, so a shaft can leave out near
+//! cells that would force it to more layers and texels.
 
 use std::f64::consts::PI;
 
@@ -159,35 +168,95 @@ impl AxisGrid {
     }
 }
 
-/// Half-angle of the cone around `axis` containing the spheres seen in
-/// unit directions `dirs` with angular radii `radii`.
-fn cone_half_angle(dirs: &[DVec3], radii: &[f64], axis: DVec3) -> f64 {
+/// Half-angle of the cone around `axis` containing the unit directions
+/// `dirs`.
+fn cone_half_angle(dirs: &[DVec3], axis: DVec3) -> f64 {
     dirs.iter()
-        .zip(radii)
-        .map(|(w, r)| w.dot(axis).clamp(-1.0, 1.0).acos() + r)
-        .fold(0.0, f64::max)
+        .map(|w| w.dot(axis))
+        .fold(1.0, f64::min)
+        .clamp(-1.0, 1.0)
+        .acos()
 }
 
-/// An axis for a narrow cone around unit directions `dirs`, from `axis`:
-/// a few steps of moving it towards the farthest direction (Bădoiu and
-/// Clarkson's core-set iteration on the sphere).
-fn fit_cone(dirs: &[DVec3], axis: DVec3) -> DVec3 {
-    let mut a = axis;
-    for k in 1..=8 {
-        let Some(far) = dirs
-            .iter()
-            .copied()
-            .min_by(|x, y| x.dot(a).total_cmp(&y.dot(a)))
-        else {
-            break;
-        };
-        let next = (a + (far - a) / (f64::from(k) + 1.0)).normalize_or_zero();
-        if next == DVec3::ZERO {
+/// Axes of the smallest cones around prefixes of unit directions `dirs`:
+/// entry `k` of the result is for `dirs[..ends[k]]` (`ends` ascending).
+///
+/// Welzl's algorithm on spherical caps (a cap through two directions is
+/// centred on their midpoint, through three on their plane's normal) is
+/// incremental: after the first `m` directions its cap is the smallest
+/// around them, so one pass answers every prefix. Each segment between two
+/// ends is shuffled with a fixed seed, which keeps the expected time linear
+/// and the answer the same on every run. The directions must lie in a
+/// half-space through the origin (cones up to 90°); if they do not, or
+/// rounding makes a cap degenerate, an entry may be a wider cone or `None`
+/// but never a wrong one: callers measure the half-angle around the axis.
+fn fit_cones(dirs: &[DVec3], ends: &[usize]) -> Vec<Option<DVec3>> {
+    const TOL: f64 = 1e-12;
+    let mut p: Vec<DVec3> = dirs.to_vec();
+    let mut state = 0x9E37_79B9_7F4A_7C15_u64;
+    let mut seg_start = 0;
+    for &end in ends {
+        // Fisher–Yates with a fixed xorshift seed, within the segment.
+        for i in (seg_start + 1..end).rev() {
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            let r = seg_start + (state % (i - seg_start + 1) as u64) as usize;
+            p.swap(i, r);
+        }
+        seg_start = seg_start.max(end);
+    }
+    let cap2 = |a: DVec3, b: DVec3| {
+        let axis = (a + b).normalize_or_zero();
+        (axis, axis.dot(a))
+    };
+    let cap3 = |a: DVec3, b: DVec3, c: DVec3| {
+        let n = (b - a).cross(c - a).normalize_or_zero();
+        let n = if n.dot(a) < 0.0 { -n } else { n };
+        (n, n.dot(a))
+    };
+    let inside = |(axis, cos): (DVec3, f64), x: DVec3| x.dot(axis) >= cos - TOL;
+    let valid = |(axis, cos): (DVec3, f64)| {
+        (axis != DVec3::ZERO && cos > 0.0 && axis.is_finite()).then_some(axis)
+    };
+    let mut out = Vec::with_capacity(ends.len());
+    let mut cap = (DVec3::ZERO, 2.0);
+    let mut next_end = ends.iter().peekable();
+    for i in 0..=p.len() {
+        while next_end.next_if(|&&e| e <= i).is_some() {
+            out.push(if i == 0 { None } else { valid(cap) });
+        }
+        if i == p.len() {
             break;
         }
-        a = next;
+        if i > 0 && inside(cap, p[i]) {
+            continue;
+        }
+        cap = (p[i], 1.0);
+        for j in 0..i {
+            if inside(cap, p[j]) {
+                continue;
+            }
+            cap = cap2(p[i], p[j]);
+            for k in 0..j {
+                if inside(cap, p[k]) {
+                    continue;
+                }
+                let c3 = cap3(p[i], p[j], p[k]);
+                // Nearly collinear triples: keep the widest pair's cap.
+                cap = if c3.0 == DVec3::ZERO {
+                    [cap2(p[i], p[k]), cap2(p[j], p[k])]
+                        .into_iter()
+                        .min_by(|x, y| x.1.total_cmp(&y.1))
+                        .expect("two caps")
+                } else {
+                    c3
+                };
+            }
+        }
     }
-    a
+    out.resize(ends.len(), None);
+    out
 }
 
 /// A candidate key, sortable and deduplicated per node.
@@ -215,7 +284,14 @@ pub fn generate(ctx: &Context, job: &Job, pv: &ProblemViews) -> Candidates {
         .collect();
     alphas.sort_by(f64::total_cmp);
     alphas.dedup();
-    let doublings = job.candidates.min_distance_doublings;
+    let steps = job.candidates.min_distance_steps.max(1);
+    let last_k = job.candidates.min_distance_doublings.saturating_mul(steps);
+    // Minimum distance `k` of a cluster of diameter `size`: size·2^(k/steps),
+    // exact at whole doublings.
+    let d_of = |size: f64, k: u32| {
+        size * f64::from(1u32 << (k / steps).min(31))
+            * 2f64.powf(f64::from(k % steps) / f64::from(steps))
+    };
 
     // Invert the (CPV → clusters) lists into (cluster → CPVs), then split
     // each cluster's list into groups of one cell (CPVs of one cell are
@@ -270,6 +346,14 @@ pub fn generate(ctx: &Context, job: &Job, pv: &ProblemViews) -> Candidates {
                 return (Vec::new(), Vec::new());
             }
             let sphere = h.nodes[n as usize].sphere;
+            // Directions of each group's cell corners from the cluster.
+            let corner_dirs: Vec<[DVec3; 8]> = (g0..g1)
+                .map(|g| {
+                    let gr = groups[g as usize];
+                    let region = pv.cpvs[pairs[gr.start as usize].0 as usize].region;
+                    region.corners().map(|p| (p - sphere.center).normalize())
+                })
+                .collect();
             let size = 2.0 * sphere.radius;
             // (key, group) for every cell inside the key's view cell.
             let mut tuples: Vec<(Key, u32)> = Vec::new();
@@ -290,13 +374,13 @@ pub fn generate(ctx: &Context, job: &Job, pv: &ProblemViews) -> Candidates {
                     })
                 };
                 if shafts && size > 0.0 && dist >= size {
-                    // Largest k with size·2^k ≤ dist.
+                    // Largest k with d_k ≤ dist.
                     let mut k = 0u32;
-                    while k < doublings && size * f64::from(1u32 << (k + 1).min(31)) <= dist {
+                    while k < last_k && d_of(size, k + 1) <= dist {
                         k += 1;
                     }
-                    let d_k = size * f64::from(1u32 << k.min(31));
-                    let corners = region.corners().map(|p| (p - sphere.center).normalize());
+                    let d_k = d_of(size, k);
+                    let corners = &corner_dirs[(g - g0) as usize];
                     let w = (region.center() - sphere.center).normalize();
                     for (ai, &alpha) in alphas.iter().enumerate() {
                         let Some(spec) = imodel.shaft(&sphere, alpha, d_k) else {
@@ -376,7 +460,7 @@ pub fn generate(ctx: &Context, job: &Job, pv: &ProblemViews) -> Candidates {
                 )),
                 _ => (ka, ga).cmp(&(kb, gb)),
             });
-            let mut cands = Vec::new();
+            let mut cands: Vec<Candidate> = Vec::new();
             let mut served: Vec<u32> = Vec::with_capacity(tuples.len());
             let mut i = 0;
             while i < tuples.len() {
@@ -404,58 +488,58 @@ pub fn generate(ctx: &Context, job: &Job, pv: &ProblemViews) -> Candidates {
                 }
                 let start = served.len() as u32;
                 served.extend(tuples[i..e].iter().map(|t| t.1));
-                // Shafts: the served cells' directions and angular radii
-                // from the cluster, and an axis fitted to the whole block
-                // (its candidates serve prefixes of it).
-                let (dirs, radii, block_axis) = match tuples[i].0 {
-                    Key::Shaft { m, j, .. } => {
-                        let (dirs, radii): (Vec<DVec3>, Vec<f64>) = tuples[i..e]
-                            .iter()
-                            .map(|&(_, g)| {
-                                let b = pv.kd[groups[g as usize].kd as usize].aabb;
-                                let v = b.center() - sphere.center;
-                                let l = v.length();
-                                let rho = (b.half_diagonal() / l).min(1.0).asin();
-                                (v / l, rho)
-                            })
-                            .unzip();
-                        let axis = fit_cone(&dirs, grid.axis(m, j));
-                        (dirs, radii, axis)
-                    }
-                    Key::Box { .. } => (Vec::new(), Vec::new(), DVec3::ZERO),
-                };
-                // One candidate per distinct key of the block, serving the
+                // The block's candidates: one per distinct key, serving the
                 // block's prefix up to the end of its key.
-                let mut s = i;
-                while s < e {
-                    let mut t = s;
-                    while t < e && tuples[t].0 == tuples[s].0 {
-                        t += 1;
+                let mut ends: Vec<usize> = Vec::new();
+                for t in i + 1..=e {
+                    if t == e || tuples[t].0 != tuples[t - 1].0 {
+                        ends.push(t);
                     }
+                }
+                // Shafts: the directions of the served cells' corners from
+                // the cluster, eight per cell in block order, and the
+                // smallest cone around each candidate's prefix.
+                let (dirs, fits) = match tuples[i].0 {
+                    Key::Shaft { .. } => {
+                        let dirs: Vec<DVec3> = tuples[i..e]
+                            .iter()
+                            .flat_map(|&(_, g)| corner_dirs[(g - g0) as usize])
+                            .collect();
+                        let corner_ends: Vec<usize> = ends.iter().map(|&t| 8 * (t - i)).collect();
+                        let fits = fit_cones(&dirs, &corner_ends);
+                        (dirs, fits)
+                    }
+                    Key::Box { .. } => (Vec::new(), Vec::new()),
+                };
+                let first_in_block = cands.len();
+                let mut nearest = f64::INFINITY;
+                let mut grid_widest = 0.0f64;
+                let mut s = i;
+                for (c, &t) in ends.iter().enumerate() {
                     let len = (t - i) as u32;
                     let cand = match tuples[s].0 {
                         Key::Shaft { angle, m, j, k } => {
                             let alpha = alphas[angle as usize];
+                            let grid_axis = grid.axis(m, j);
                             // The shaft starts where its nearest served
-                            // cell does (never before `size·2^k`): the same
+                            // cell does (never before `d_k`): the same
                             // cells are served, at the resolution and layer
                             // count their distance needs.
-                            let nearest = tuples[i..t]
-                                .iter()
-                                .map(|&(_, g)| groups[g as usize].dist)
-                                .fold(f64::INFINITY, f64::min);
-                            let d = (size * f64::from(1u32 << k.min(31))).max(nearest);
-                            // Likewise it narrows, around an axis re-aimed
-                            // at the served cells, to the widest angle of
-                            // their corners.
-                            let n_served = t - i;
-                            let (axis, widest) = [grid.axis(m, j), block_axis]
-                                .into_iter()
-                                .map(|a| {
-                                    (a, cone_half_angle(&dirs[..n_served], &radii[..n_served], a))
-                                })
-                                .min_by(|x, y| x.1.total_cmp(&y.1))
-                                .expect("two axes");
+                            for &(_, g) in &tuples[s..t] {
+                                nearest = nearest.min(groups[g as usize].dist);
+                            }
+                            let d = d_of(size, k).max(nearest);
+                            // Likewise it narrows to the smallest cone
+                            // around the served cells' corners (convex, so
+                            // it contains the cells), measured exactly; the
+                            // grid axis stands in should the fit fail.
+                            let corners = &dirs[..8 * (t - i)];
+                            grid_widest = grid_widest
+                                .max(cone_half_angle(&dirs[8 * (s - i)..8 * (t - i)], grid_axis));
+                            let (axis, widest) = fits[c]
+                                .map(|a| (a, cone_half_angle(corners, a)))
+                                .filter(|fit| fit.1 < grid_widest)
+                                .unwrap_or((grid_axis, grid_widest));
                             let alpha = alpha.min(widest * (1.0 + 1e-9) + 1e-12);
                             imodel.shaft(&sphere, alpha, d).map(|spec| Candidate {
                                 node: n,
@@ -481,7 +565,21 @@ pub fn generate(ctx: &Context, job: &Job, pv: &ProblemViews) -> Candidates {
                             })
                         }
                     };
-                    cands.extend(cand);
+                    if let Some(cand) = cand {
+                        // A shaft that serves a longer prefix of the block
+                        // with the same layers and no more memory is at
+                        // least as good in every problem view: it replaces
+                        // the previous one.
+                        let block_first = cands.len() > first_in_block;
+                        if let (true, Some(prev)) = (block_first, cands.last())
+                            && prev.kd == u32::MAX
+                            && prev.spec.layers == cand.spec.layers
+                            && prev.spec.memory_bytes >= cand.spec.memory_bytes
+                        {
+                            cands.pop();
+                        }
+                        cands.push(cand);
+                    }
                     s = t;
                 }
                 i = e;
@@ -504,5 +602,88 @@ pub fn generate(ctx: &Context, job: &Job, pv: &ProblemViews) -> Candidates {
         pairs,
         groups,
         served,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn fitted_cones_are_close_to_the_smallest() {
+        // Directions on a 10° circle around `c`: the cone found is 10°.
+        let c = DVec3::new(1.0, 0.2, -0.5).normalize();
+        let e1 = c.cross(DVec3::Y).normalize();
+        let e2 = c.cross(e1);
+        let r = 10f64.to_radians();
+        let dirs: Vec<DVec3> = (0..12)
+            .map(|k| {
+                let t = f64::from(k) * PI / 6.0;
+                (c * r.cos() + (e1 * t.cos() + e2 * t.sin()) * r.sin()).normalize()
+            })
+            .collect();
+        let a = fit_cones(&dirs, &[12])[0].unwrap();
+        let half = cone_half_angle(&dirs, a);
+        assert!((half - r).abs() < 1e-9, "{}", half.to_degrees());
+        // Inner points change nothing; a single direction is its own axis.
+        let mut more = vec![c, (c + e1 * 0.05).normalize()];
+        more.extend(&dirs);
+        let fits = fit_cones(&more, &[0, 1, 14]);
+        assert_eq!(fits[0], None);
+        assert!(fits[1].unwrap().dot(c) > 1.0 - 1e-12);
+        assert!((cone_half_angle(&more, fits[2].unwrap()) - r).abs() < 1e-9);
+    }
+
+    /// The smallest half-angle around an axis through a pair's midpoint
+    /// or a triple's plane normal (the smallest cone is one of them).
+    fn brute_force(dirs: &[DVec3]) -> f64 {
+        let n = dirs.len();
+        let mut best = f64::INFINITY;
+        for i in 0..n {
+            for j in i..n {
+                for k in j..n {
+                    let axis = if k == j {
+                        (dirs[i] + dirs[j]).normalize()
+                    } else {
+                        let a = (dirs[j] - dirs[i]).cross(dirs[k] - dirs[i]).normalize();
+                        if a.dot(dirs[i]) < 0.0 { -a } else { a }
+                    };
+                    if axis.is_finite() {
+                        best = best.min(cone_half_angle(dirs, axis));
+                    }
+                }
+            }
+        }
+        best
+    }
+
+    #[test]
+    fn fitted_cones_match_brute_force() {
+        // Random directions in a 40° cap; every prefix answered at once.
+        let mut state = 7u64;
+        let mut next = || {
+            state = state
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            (state >> 11) as f64 / (1u64 << 53) as f64
+        };
+        for _ in 0..200 {
+            let n = 3 + (next() * 9.0) as usize;
+            let dirs: Vec<DVec3> = (0..n)
+                .map(|_| {
+                    let t = next() * 2.0 * PI;
+                    let r = next() * 40f64.to_radians();
+                    DVec3::new(r.sin() * t.cos(), r.sin() * t.sin(), r.cos())
+                })
+                .collect();
+            let ends = [1, n / 2, n];
+            let fits = fit_cones(&dirs, &ends);
+            for (&end, fit) in ends.iter().zip(&fits) {
+                let prefix = &dirs[..end];
+                let half = cone_half_angle(prefix, fit.unwrap());
+                let best = brute_force(prefix);
+                assert!((half - best).abs() < 1e-7, "{half} vs {best}");
+            }
+        }
     }
 }

@@ -353,10 +353,16 @@ pub struct CandidateParams {
     /// view space has height), degrees. Default 11.25.
     #[serde(default = "default_dir_step")]
     pub direction_step_deg: f64,
-    /// Shaft minimum distances are `size · 2^k` for `k = 0..=doublings`, with
+    /// Shaft minimum distances range from `size` to `size · 2^doublings`, with
     /// size the cluster's diameter. Default 10.
     #[serde(default = "default_doublings")]
     pub min_distance_doublings: u32,
+    /// Shaft minimum distances per doubling: `size · 2^(k/steps)` for
+    /// `k = 0..=steps·doublings`. The paper uses 1; finer steps let a shaft
+    /// leave out nearer cells it need not serve (less memory, more
+    /// candidates). Default 4.
+    #[serde(default = "default_distance_steps")]
+    pub min_distance_steps: u32,
 }
 
 /// Impostor memory model.
@@ -422,6 +428,10 @@ fn default_dir_step() -> f64 {
 }
 fn default_doublings() -> u32 {
     10
+}
+
+fn default_distance_steps() -> u32 {
+    4
 }
 fn default_bpt() -> f64 {
     4.0
@@ -503,6 +513,7 @@ impl Default for CandidateParams {
             apex_angles_deg: default_apex(),
             direction_step_deg: default_dir_step(),
             min_distance_doublings: default_doublings(),
+            min_distance_steps: default_distance_steps(),
         }
     }
 }
@@ -744,6 +755,12 @@ impl Job {
                 format!("{} must be at most 30", cp.min_distance_doublings),
             ));
         }
+        if !(1..=16).contains(&cp.min_distance_steps) {
+            return Err(bad(
+                "candidates.min_distance_steps",
+                format!("{} must be in [1, 16]", cp.min_distance_steps),
+            ));
+        }
         let m = &self.memory;
         if !(m.bytes_per_texel.is_finite() && m.bytes_per_texel > 0.0 && m.bytes_per_texel <= 64.0)
         {
@@ -887,6 +904,8 @@ mod tests {
         assert_eq!(j.problem_views.min_vdi_deg, 11.25);
         assert_eq!(j.candidates.apex_angles_deg, vec![11.25, 22.5, 45.0, 90.0]);
         assert_eq!(j.candidates.min_distance_doublings, 10);
+        // The one departure: four minimum distances per doubling (the paper: 1).
+        assert_eq!(j.candidates.min_distance_steps, 4);
         assert_eq!(j.max_error_px, 1.0);
         assert_eq!(j.view_space.pitch_deg, [-90.0, 90.0]);
         // θ for 45° and 512 rows.
@@ -915,6 +934,10 @@ mod tests {
             (
                 r#"{"view_space":{"min":[0,0,0],"max":[1,1,1]},"camera":{"fov_deg":0}}"#,
                 "camera.fov_deg",
+            ),
+            (
+                r#"{"view_space":{"min":[0,0,0],"max":[1,1,1]},"candidates":{"min_distance_steps":0}}"#,
+                "candidates.min_distance_steps",
             ),
             (
                 r#"{"view_space":{"min":[0,0,0],"max":[1,1,1],"pitch_deg":[10,-10]}}"#,

@@ -674,6 +674,27 @@ mod tests {
     }
 
     #[test]
+    fn every_candidate_contains_the_regions_it_serves() {
+        let scene = synthetic_city(5, 5, 5);
+        let mut job = synthetic_job(5, 5);
+        job.candidates.view_cells = crate::job::ViewCellKind::Both;
+        let h = Hierarchy::build(&scene);
+        let ctx = Context::new(&scene, &h, &job);
+        let pv = problem_views::approximate(&ctx, &job);
+        let cands = candidates::generate(&ctx, &job, &pv);
+        let mut checked = 0;
+        for (i, c) in cands.list.iter().enumerate() {
+            cands.for_each_served(i as u32, |cpv, idx| {
+                let cpv = &pv.cpvs[cpv as usize];
+                assert_eq!(cpv.node_ids[idx as usize], c.node);
+                assert!(c.cell.contains_box(&cpv.region), "{c:?} {:?}", cpv.region);
+                checked += 1;
+            });
+        }
+        assert!(checked > 1000, "{checked}");
+    }
+
+    #[test]
     fn per_cell_impostors_serve_one_cell_each() {
         let scene = synthetic_city(2, 5, 5);
         let mut job = synthetic_job(5, 5);
