@@ -259,6 +259,31 @@ fn fit_cones(dirs: &[DVec3], ends: &[usize]) -> Vec<Option<DVec3>> {
     out
 }
 
+/// Minimum distance `k` of the ladder for a cluster of diameter `size`:
+/// `size·2^(k/steps)`, exact at whole doublings.
+fn ladder_distance(size: f64, k: u32, steps: u32) -> f64 {
+    size * f64::from(1u32 << (k / steps).min(31))
+        * 2f64.powf(f64::from(k % steps) / f64::from(steps))
+}
+
+/// The largest `k ≤ last_k` whose ladder distance is at most `dist` (0 if
+/// none is): from the logarithm, then corrected for its rounding.
+fn ladder_index(size: f64, dist: f64, steps: u32, last_k: u32) -> u32 {
+    let guess = (f64::from(steps) * (dist / size).log2()).floor();
+    let mut k = if guess.is_nan() {
+        0
+    } else {
+        guess.clamp(0.0, f64::from(last_k)) as u32
+    };
+    while k > 0 && ladder_distance(size, k, steps) > dist {
+        k -= 1;
+    }
+    while k < last_k && ladder_distance(size, k + 1, steps) <= dist {
+        k += 1;
+    }
+    k
+}
+
 /// A candidate key, sortable and deduplicated per node.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord)]
 enum Key {
@@ -286,12 +311,6 @@ pub fn generate(ctx: &Context, job: &Job, pv: &ProblemViews) -> Candidates {
     alphas.dedup();
     let steps = job.candidates.min_distance_steps.max(1);
     let last_k = job.candidates.min_distance_doublings.saturating_mul(steps);
-    // Minimum distance `k` of a cluster of diameter `size`: size·2^(k/steps),
-    // exact at whole doublings.
-    let d_of = |size: f64, k: u32| {
-        size * f64::from(1u32 << (k / steps).min(31))
-            * 2f64.powf(f64::from(k % steps) / f64::from(steps))
-    };
 
     // Invert the (CPV → clusters) lists into (cluster → CPVs), then split
     // each cluster's list into groups of one cell (CPVs of one cell are
@@ -374,12 +393,8 @@ pub fn generate(ctx: &Context, job: &Job, pv: &ProblemViews) -> Candidates {
                     })
                 };
                 if shafts && size > 0.0 && dist >= size {
-                    // Largest k with d_k ≤ dist.
-                    let mut k = 0u32;
-                    while k < last_k && d_of(size, k + 1) <= dist {
-                        k += 1;
-                    }
-                    let d_k = d_of(size, k);
+                    let k = ladder_index(size, dist, steps, last_k);
+                    let d_k = ladder_distance(size, k, steps);
                     let corners = &corner_dirs[(g - g0) as usize];
                     let w = (region.center() - sphere.center).normalize();
                     for (ai, &alpha) in alphas.iter().enumerate() {
@@ -528,7 +543,7 @@ pub fn generate(ctx: &Context, job: &Job, pv: &ProblemViews) -> Candidates {
                             for &(_, g) in &tuples[s..t] {
                                 nearest = nearest.min(groups[g as usize].dist);
                             }
-                            let d = d_of(size, k).max(nearest);
+                            let d = ladder_distance(size, k, steps).max(nearest);
                             // Likewise it narrows to the smallest cone
                             // around the served cells' corners (convex, so
                             // it contains the cells), measured exactly; the
@@ -683,6 +698,26 @@ mod tests {
                 let half = cone_half_angle(prefix, fit.unwrap());
                 let best = brute_force(prefix);
                 assert!((half - best).abs() < 1e-7, "{half} vs {best}");
+            }
+        }
+    }
+
+    #[test]
+    fn ladder_indices_are_exact_at_the_rungs() {
+        for steps in [1, 3, 4] {
+            let last = 10 * steps;
+            for size in [0.37, 2.0, 31.4] {
+                for k in 0..=last {
+                    let d = ladder_distance(size, k, steps);
+                    assert_eq!(ladder_index(size, d, steps, last), k);
+                    if k > 0 {
+                        assert_eq!(ladder_index(size, d * (1.0 - 1e-12), steps, last), k - 1);
+                    }
+                }
+                // Whole doublings are exact; beyond the ladder, its last rung.
+                assert_eq!(ladder_distance(size, 2 * steps, steps), size * 4.0);
+                assert_eq!(ladder_index(size, size * 1e6, steps, last), last);
+                assert_eq!(ladder_index(size, size * 0.5, steps, last), 0);
             }
         }
     }
