@@ -6,7 +6,11 @@
 //! `s_i = Σ_CPV Δt_{i,CPV} / m_i`. A max-heap holds scores stamped with the
 //! state version they were computed in; a stale top is recomputed (with a
 //! fixed-size batch of the stale keys below it) and re-pushed, a fresh top is
-//! accepted. In exact arithmetic no score increases when an impostor is added
+//! accepted. Scores are computed a block at a time: the shafts of one cluster,
+//! angle and axis serve growing prefixes of the same cells, so a run of them
+//! with the same layer count shares one walk over the cells (the sums are the
+//! same, bit for bit, as scoring each alone); a block's fresh keys make its
+//! older keys outdated, and outdated keys are dropped when popped. In exact arithmetic no score increases when an impostor is added
 //! (`sum` and `primitives` modes), so a fresh top is the greedy choice; in
 //! `max` mode, and by rounding, lazy recalculation is a heuristic. Ties are
 //! broken by the lower candidate id and the batch never depends on the
@@ -23,6 +27,7 @@ use rayon::prelude::*;
 
 use crate::candidates::{Candidate, Candidates};
 use crate::cost::Cost;
+use crate::geom::Sphere;
 use crate::problem_views::{Context, Cpv, ProblemViews};
 
 /// The selection: which candidates are impostors and where they are used.
@@ -220,6 +225,53 @@ impl<'a> State<'a> {
         sum / self.cands[i as usize].spec.memory_bytes.max(1) as f64
     }
 
+    /// Adds to `sum` the gains of the groups `served[from..to]` for an
+    /// impostor of `layers` layers of the cluster with sphere `s` (in the
+    /// order [`score`](Self::score) adds them).
+    fn add_gains(&self, s: Sphere, layers: u32, from: usize, to: usize, sum: &mut f64) {
+        let all = self.all;
+        for &g in &all.served[from..to] {
+            let gr = all.groups[g as usize];
+            if self.unsolved_in_cell[gr.kd as usize] == 0 {
+                continue;
+            }
+            let imp = self.ctx.model.impostor(layers, s.radius, gr.dist);
+            for &(c, idx) in &all.pairs[gr.start as usize..gr.end as usize] {
+                if self.ctx.model.frame_time(self.sel.cpv_cost[c as usize]) <= self.ctx.t_max {
+                    continue;
+                }
+                if let Some(e) = self.effect(c, idx, imp) {
+                    *sum += e.delta;
+                }
+            }
+        }
+    }
+
+    /// The scores of the candidates `first..end` of one block, which serve
+    /// growing prefixes of the same groups (see [`blocks`]). Equal to
+    /// [`score`](Self::score) of each, bit for bit, but a run of candidates
+    /// with the same layer count walks the groups once.
+    fn score_block(&self, first: u32, end: u32) -> Vec<f64> {
+        let mut out = Vec::with_capacity((end - first) as usize);
+        let mut j = first as usize;
+        while j < end as usize {
+            let c0 = &self.cands[j];
+            let s = self.ctx.hierarchy.nodes[c0.node as usize].sphere;
+            let start = c0.served.0 as usize;
+            let (mut sum, mut pos) = (0.0, 0usize);
+            let mut k = j;
+            while k < end as usize && self.cands[k].spec.layers == c0.spec.layers {
+                let len = self.cands[k].served.1 as usize;
+                self.add_gains(s, c0.spec.layers, start + pos, start + len, &mut sum);
+                pos = len;
+                out.push(sum / self.cands[k].spec.memory_bytes.max(1) as f64);
+                k += 1;
+            }
+            j = k;
+        }
+        out
+    }
+
     fn accept(&mut self, i: u32) {
         let mut changes: Vec<(u32, u32, Cost)> = Vec::new();
         self.for_each_effect(i, false, |c, idx, e| {
@@ -293,15 +345,38 @@ fn listed_ancestors(ctx: &Context, ids: &[u32]) -> Vec<u32> {
     up
 }
 
-/// Stale keys refreshed together in [`select_lazy`].
+/// Per candidate, the first and one-past-last candidate of its block: the
+/// candidates of one cluster that serve growing prefixes of the same served
+/// groups (one shaft angle and axis); a box is a block of its own.
+fn blocks(cands: &[Candidate]) -> Vec<(u32, u32)> {
+    let mut out = vec![(0, 0); cands.len()];
+    let mut i = 0;
+    while i < cands.len() {
+        let mut e = i + 1;
+        while e < cands.len()
+            && cands[e].node == cands[i].node
+            && cands[e].served.0 == cands[i].served.0
+            && cands[e].served.1 >= cands[e - 1].served.1
+        {
+            e += 1;
+        }
+        for o in &mut out[i..e] {
+            *o = (i as u32, e as u32);
+        }
+        i = e;
+    }
+    out
+}
+
+/// Blocks of stale keys refreshed together in [`select_lazy`].
 pub const LAZY_BATCH: usize = 32;
 
 /// Lazy greedy selection.
 ///
 /// Keys carry the state version they were computed in; a key popped with the
 /// current version is exact and, being the largest of upper bounds, is the
-/// greedy choice. Stale keys are recomputed a batch of [`LAZY_BATCH`] at a
-/// time in parallel. Scores can rise (memory regained by hierarchy
+/// greedy choice. Stale keys are recomputed, with their whole blocks, a batch
+/// of [`LAZY_BATCH`] blocks at a time in parallel. Scores can rise (memory regained by hierarchy
 /// replacement), so which stale keys get refreshed may change the choice: the
 /// batch is a constant, never derived from the thread count, so the result is
 /// the same for any number of threads.
@@ -319,11 +394,18 @@ pub fn select_lazy(
     if !progress(st.unsolved()) {
         return st.sel;
     }
-    let initial: Vec<f64> = (0..cands.list.len() as u32)
-        .into_par_iter()
-        .map(|i| st.score(i))
+    // Scores are computed a block at a time (its candidates share most of
+    // the work); a block's fresh keys make its older keys outdated.
+    let blocks = blocks(&cands.list);
+    let firsts: Vec<u32> = (0..cands.list.len() as u32)
+        .filter(|&i| blocks[i as usize].0 == i)
+        .collect();
+    let initial: Vec<f64> = firsts
+        .par_iter()
+        .flat_map_iter(|&b| st.score_block(b, blocks[b as usize].1))
         .collect();
     st.sel.evaluations = initial.len() as u64;
+    let mut latest = vec![0u64; cands.list.len()];
     let mut heap: BinaryHeap<(Key, u64)> = initial
         .into_iter()
         .enumerate()
@@ -342,6 +424,10 @@ pub fn select_lazy(
     let mut version = 0u64;
     let mut stale: Vec<u32> = Vec::with_capacity(batch);
     while let Some(&(top, stamp)) = heap.peek() {
+        if stamp < latest[top.id as usize] {
+            heap.pop();
+            continue;
+        }
         if stamp == version {
             heap.pop();
             st.accept(top.id);
@@ -355,18 +441,30 @@ pub fn select_lazy(
         stale.clear();
         while stale.len() < batch {
             match heap.peek() {
+                Some(&(k, s)) if s < latest[k.id as usize] => {
+                    heap.pop();
+                }
                 Some(&(k, s)) if s != version => {
                     heap.pop();
-                    stale.push(k.id);
+                    let b = blocks[k.id as usize].0;
+                    if !stale.contains(&b) {
+                        stale.push(b);
+                    }
                 }
                 _ => break,
             }
         }
-        let fresh: Vec<f64> = stale.par_iter().map(|&i| st.score(i)).collect();
-        st.sel.evaluations += fresh.len() as u64;
-        for (&id, score) in stale.iter().zip(fresh) {
-            if score > 0.0 {
-                heap.push((Key { score, id }, version));
+        let fresh: Vec<Vec<f64>> = stale
+            .par_iter()
+            .map(|&b| st.score_block(b, blocks[b as usize].1))
+            .collect();
+        for (&b, scores) in stale.iter().zip(fresh) {
+            st.sel.evaluations += scores.len() as u64;
+            for (id, score) in (b..).zip(scores) {
+                latest[id as usize] = version;
+                if score > 0.0 {
+                    heap.push((Key { score, id }, version));
+                }
             }
         }
     }
@@ -449,4 +547,45 @@ pub fn prune(ctx: &Context, pv: &ProblemViews, cands: &Candidates, sel: &mut Sel
         st.sel.pruned += 1;
     }
     *sel = st.sel;
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::hierarchy::Hierarchy;
+    use crate::problem_views;
+    use crate::testutil::{synthetic_city, synthetic_job};
+
+    #[test]
+    fn block_scores_equal_single_scores_bit_for_bit() {
+        let scene = synthetic_city(3, 5, 5);
+        let job = synthetic_job(5, 5);
+        let h = Hierarchy::build(&scene);
+        let ctx = Context::new(&scene, &h, &job);
+        let pv = problem_views::approximate(&ctx, &job);
+        let cands = crate::candidates::generate(&ctx, &job, &pv);
+        let mut st = State::new(&ctx, &pv, &cands);
+        let blocks = blocks(&cands.list);
+        // Blocks with several candidates exist (nested shafts).
+        assert!(blocks.iter().any(|&(a, b)| b - a > 2));
+        let check = |st: &State| {
+            for (i, &(a, b)) in blocks.iter().enumerate() {
+                if i as u32 == a {
+                    let single: Vec<u64> = (a..b).map(|k| st.score(k).to_bits()).collect();
+                    let block: Vec<u64> =
+                        st.score_block(a, b).iter().map(|s| s.to_bits()).collect();
+                    assert_eq!(single, block, "block {a}..{b}");
+                }
+            }
+        };
+        check(&st);
+        // And after some choices, when cells are solved and clusters covered.
+        for _ in 0..5 {
+            let best = (0..cands.list.len() as u32)
+                .max_by(|&x, &y| st.score(x).total_cmp(&st.score(y)).then(y.cmp(&x)))
+                .unwrap();
+            st.accept(best);
+        }
+        check(&st);
+    }
 }
