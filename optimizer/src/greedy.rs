@@ -191,27 +191,17 @@ impl<'a> State<'a> {
         })
     }
 
-    /// Calls `f(cpv, idx, effect)` for every CPV candidate `i` may serve; with
-    /// `unsolved_only`, only for CPVs still above `t_max`.
-    fn for_each_effect(&self, i: u32, unsolved_only: bool, mut f: impl FnMut(u32, u32, Effect)) {
+    /// Calls `f(cpv, idx, effect)` for every CPV candidate `i` may serve.
+    fn for_each_effect(&self, i: u32, mut f: impl FnMut(u32, u32, Effect)) {
         let all = self.all;
         let cand = &self.cands[i as usize];
         let s = self.ctx.hierarchy.nodes[cand.node as usize].sphere;
         let (start, n) = cand.served;
         for &g in &all.served[start as usize..(start + n) as usize] {
             let gr = all.groups[g as usize];
-            if unsolved_only && self.unsolved_in_cell[gr.kd as usize] == 0 {
-                continue;
-            }
-            let pairs = &all.pairs[gr.start as usize..gr.end as usize];
             // All CPVs of a group share their region, hence the impostor's cost.
             let imp = self.ctx.model.impostor(cand.spec.layers, s.radius, gr.dist);
-            for &(c, idx) in pairs {
-                if unsolved_only
-                    && self.ctx.model.frame_time(self.sel.cpv_cost[c as usize]) <= self.ctx.t_max
-                {
-                    continue;
-                }
+            for &(c, idx) in &all.pairs[gr.start as usize..gr.end as usize] {
                 if let Some(e) = self.effect(c, idx, imp) {
                     f(c, idx, e);
                 }
@@ -220,14 +210,17 @@ impl<'a> State<'a> {
     }
 
     fn score(&self, i: u32) -> f64 {
+        let c = &self.cands[i as usize];
+        let s = self.ctx.hierarchy.nodes[c.node as usize].sphere;
+        let (start, n) = (c.served.0 as usize, c.served.1 as usize);
         let mut sum = 0.0;
-        self.for_each_effect(i, true, |_, _, e| sum += e.delta);
-        sum / self.cands[i as usize].spec.memory_bytes.max(1) as f64
+        self.add_gains(s, c.spec.layers, start, start + n, &mut sum);
+        sum / c.spec.memory_bytes.max(1) as f64
     }
 
     /// Adds to `sum` the gains of the groups `served[from..to]` for an
-    /// impostor of `layers` layers of the cluster with sphere `s` (in the
-    /// order [`score`](Self::score) adds them).
+    /// impostor of `layers` layers of the cluster with sphere `s`, counting
+    /// only CPVs still above `t_max`.
     fn add_gains(&self, s: Sphere, layers: u32, from: usize, to: usize, sum: &mut f64) {
         let all = self.all;
         for &g in &all.served[from..to] {
@@ -274,7 +267,7 @@ impl<'a> State<'a> {
 
     fn accept(&mut self, i: u32) {
         let mut changes: Vec<(u32, u32, Cost)> = Vec::new();
-        self.for_each_effect(i, false, |c, idx, e| {
+        self.for_each_effect(i, |c, idx, e| {
             if e.accelerates {
                 changes.push((c, idx, e.new_cost));
             }
