@@ -28,6 +28,7 @@ use rayon::prelude::*;
 use serde::Serialize;
 use serde_json::json;
 
+use crate::geom::Aabb;
 use crate::geometry::{AlphaMode, SceneGeometry};
 use crate::glb::{self, GlbBuilder, MeshPrimitive, MinFilter, Node, Sampler};
 use crate::job::MemoryParams;
@@ -154,18 +155,14 @@ pub fn parallax(imp: &PlacedImpostor, rng: &mut crate::rng::Rng, points: u32, vi
     }
     let viewpoints: Vec<DVec3> = match &imp.view_cell {
         ViewCellJson::Box { min, max } => {
-            let (lo, hi) = (DVec3::from_array(*min), DVec3::from_array(*max));
-            (0..views)
+            let cell = Aabb::new(DVec3::from_array(*min), DVec3::from_array(*max));
+            let corners = cell.corners();
+            (0..views as usize)
                 .map(|i| {
-                    if i < 8 {
-                        DVec3::new(
-                            if i & 1 == 0 { lo.x } else { hi.x },
-                            if i & 2 == 0 { lo.y } else { hi.y },
-                            if i & 4 == 0 { lo.z } else { hi.z },
-                        )
-                    } else {
-                        rng.in_box(lo, hi)
-                    }
+                    corners
+                        .get(i)
+                        .copied()
+                        .unwrap_or_else(|| rng.in_box(cell.min, cell.max))
                 })
                 .collect()
         }

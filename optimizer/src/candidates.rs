@@ -180,6 +180,8 @@ fn cone_half_angle(dirs: &[DVec3], axis: DVec3) -> f64 {
 
 /// Axes of the smallest cones around prefixes of unit directions `dirs`:
 /// entry `k` of the result is for `dirs[..ends[k]]` (`ends` ascending).
+/// Reorders `dirs` within each segment between two ends, so every prefix
+/// still holds the same directions.
 ///
 /// Welzl's algorithm on spherical caps (a cap through two directions is
 /// centred on their midpoint, through three on their plane's normal) is
@@ -190,9 +192,8 @@ fn cone_half_angle(dirs: &[DVec3], axis: DVec3) -> f64 {
 /// half-space through the origin (cones up to 90°); if they do not, or
 /// rounding makes a cap degenerate, an entry may be a wider cone or `None`
 /// but never a wrong one: callers measure the half-angle around the axis.
-fn fit_cones(dirs: &[DVec3], ends: &[usize]) -> Vec<Option<DVec3>> {
+fn fit_cones(p: &mut [DVec3], ends: &[usize]) -> Vec<Option<DVec3>> {
     const TOL: f64 = 1e-12;
-    let mut p: Vec<DVec3> = dirs.to_vec();
     let mut state = 0x9E37_79B9_7F4A_7C15_u64;
     let mut seg_start = 0;
     for &end in ends {
@@ -516,12 +517,12 @@ pub fn generate(ctx: &Context, job: &Job, pv: &ProblemViews) -> Candidates {
                 // smallest cone around each candidate's prefix.
                 let (dirs, fits) = match tuples[i].0 {
                     Key::Shaft { .. } => {
-                        let dirs: Vec<DVec3> = tuples[i..e]
+                        let mut dirs: Vec<DVec3> = tuples[i..e]
                             .iter()
                             .flat_map(|&(_, g)| corner_dirs[(g - g0) as usize])
                             .collect();
                         let corner_ends: Vec<usize> = ends.iter().map(|&t| 8 * (t - i)).collect();
-                        let fits = fit_cones(&dirs, &corner_ends);
+                        let fits = fit_cones(&mut dirs, &corner_ends);
                         (dirs, fits)
                     }
                     Key::Box { .. } => (Vec::new(), Vec::new()),
@@ -637,13 +638,13 @@ mod tests {
                 (c * r.cos() + (e1 * t.cos() + e2 * t.sin()) * r.sin()).normalize()
             })
             .collect();
-        let a = fit_cones(&dirs, &[12])[0].unwrap();
+        let a = fit_cones(&mut dirs.clone(), &[12])[0].unwrap();
         let half = cone_half_angle(&dirs, a);
         assert!((half - r).abs() < 1e-9, "{}", half.to_degrees());
         // Inner points change nothing; a single direction is its own axis.
         let mut more = vec![c, (c + e1 * 0.05).normalize()];
         more.extend(&dirs);
-        let fits = fit_cones(&more, &[0, 1, 14]);
+        let fits = fit_cones(&mut more.clone(), &[0, 1, 14]);
         assert_eq!(fits[0], None);
         assert!(fits[1].unwrap().dot(c) > 1.0 - 1e-12);
         assert!((cone_half_angle(&more, fits[2].unwrap()) - r).abs() < 1e-9);
@@ -692,7 +693,7 @@ mod tests {
                 })
                 .collect();
             let ends = [1, n / 2, n];
-            let fits = fit_cones(&dirs, &ends);
+            let fits = fit_cones(&mut dirs.clone(), &ends);
             for (&end, fit) in ends.iter().zip(&fits) {
                 let prefix = &dirs[..end];
                 let half = cone_half_angle(prefix, fit.unwrap());

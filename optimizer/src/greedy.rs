@@ -10,8 +10,9 @@
 //! angle and axis serve growing prefixes of the same cells, so a run of them
 //! with the same layer count shares one walk over the cells (the sums are the
 //! same, bit for bit, as scoring each alone); a block's fresh keys make its
-//! older keys outdated, and outdated keys are dropped when popped. In exact arithmetic no score increases when an impostor is added
-//! (`sum` and `primitives` modes), so a fresh top is the greedy choice; in
+//! older keys outdated, and outdated keys are dropped when popped. In exact
+//! arithmetic no score increases when an impostor is added (`sum` and
+//! `primitives` modes), so a fresh top is the greedy choice; in
 //! `max` mode, and by rounding, lazy recalculation is a heuristic. Ties are
 //! broken by the lower candidate id and the batch never depends on the
 //! thread count, so the result is deterministic.
@@ -369,10 +370,10 @@ pub const LAZY_BATCH: usize = 32;
 /// Keys carry the state version they were computed in; a key popped with the
 /// current version is exact and, being the largest of upper bounds, is the
 /// greedy choice. Stale keys are recomputed, with their whole blocks, a batch
-/// of [`LAZY_BATCH`] blocks at a time in parallel. Scores can rise (memory regained by hierarchy
-/// replacement), so which stale keys get refreshed may change the choice: the
-/// batch is a constant, never derived from the thread count, so the result is
-/// the same for any number of threads.
+/// of [`LAZY_BATCH`] blocks at a time in parallel. Scores can rise (memory
+/// regained by hierarchy replacement), so which stale keys get refreshed may
+/// change the choice: the batch is a constant, never derived from the thread
+/// count, so the result is the same for any number of threads.
 ///
 /// `progress(unsolved)` is called now and then with the number of CPVs still
 /// above `t_max`; when it returns false the selection stops early (the
