@@ -4,6 +4,7 @@
 mod bad_input;
 mod bake;
 mod cli;
+mod golden;
 mod real_scenes;
 mod report;
 mod schemas;
