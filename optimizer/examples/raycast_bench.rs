@@ -8,9 +8,9 @@ use std::time::Instant;
 
 use glam::DVec3;
 use optimizer::citygen::{CityParams, generate};
-use optimizer::geometry::load_geometry_bytes;
-use optimizer::raycast::RayCaster;
-use optimizer::rng::Rng;
+use optimizer::math::rng::Rng;
+use optimizer::render::raycast::RayCaster;
+use optimizer::scene::geometry::load_geometry_bytes;
 use rayon::prelude::*;
 
 fn main() -> optimizer::Result<()> {

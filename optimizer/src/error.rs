@@ -24,7 +24,7 @@ pub enum Error {
         /// The underlying error.
         source: std::io::Error,
     },
-    /// The run was cancelled through [`crate::pipeline::Control::cancel`].
+    /// The run was cancelled through [`crate::place::Control::cancel`].
     #[error("cancelled")]
     Cancelled,
     /// A broken internal invariant: a bug, please report it.

@@ -11,34 +11,23 @@
 
 #![deny(missing_docs)]
 
+pub mod api;
 pub mod bake;
 pub mod candidates;
 pub mod citygen;
-pub mod cost;
-pub mod env_map;
 pub mod error;
 pub mod evaluate;
-pub mod geom;
-pub mod geometry;
-pub mod glb;
-pub mod gltf_load;
 pub mod greedy;
-pub mod hierarchy;
-pub mod image_eval;
-pub mod impostor_model;
 pub mod input;
-pub mod job;
-pub mod lod;
-pub mod pipeline;
-pub mod placement;
-pub mod problem_views;
-pub mod raster;
-pub mod raycast;
+pub mod math;
+pub mod methods;
+pub mod model;
+pub mod place;
+pub mod render;
 pub mod report;
-pub mod rng;
 pub mod scene;
-pub mod schema;
 pub mod testutil;
+pub mod views;
 pub mod visibility;
 
 pub use error::{Error, Result};

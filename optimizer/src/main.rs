@@ -4,13 +4,16 @@ use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
 use clap::{Parser, Subcommand};
+use optimizer::api::job::{Job, MemoryParams, Method, VisibilityMode};
+use optimizer::api::placement::Placement;
+use optimizer::api::schema;
+use optimizer::evaluate::images as image_eval;
 use optimizer::evaluate::{EvalOptions, evaluate_input};
 use optimizer::input::{SceneInput, needs_geometry};
-use optimizer::job::{Job, MemoryParams, Method, VisibilityMode};
-use optimizer::pipeline::{Control, PlaceOptions, place_input};
-use optimizer::placement::Placement;
+use optimizer::place::{Control, PlaceOptions, place_input};
+use optimizer::scene::{geometry, gltf_load};
 use optimizer::visibility::pvs::{PvsCell, PvsFile};
-use optimizer::{Error, Result, bake, citygen, geometry, gltf_load, image_eval, report, schema};
+use optimizer::{Error, Result, bake, citygen, report};
 
 /// Automatic impostor placement for guaranteed frame rates and low memory.
 #[derive(Parser)]
@@ -669,7 +672,7 @@ fn run(cli: Cli) -> Result<ExitCode> {
             }
             let input = load_input(&scene, None, &job, &job_path, false)?;
             let start = std::time::Instant::now();
-            let h = optimizer::hierarchy::Hierarchy::build(&input.scene);
+            let h = optimizer::scene::hierarchy::Hierarchy::build(&input.scene);
             let vis = optimizer::visibility::Visibility::new(
                 &job,
                 &input.scene,

@@ -2,8 +2,8 @@
 
 use glam::DVec3;
 
-use crate::job::Job;
-use crate::rng::Rng;
+use crate::api::job::Job;
+use crate::math::rng::Rng;
 use crate::scene::{Object, Scene};
 
 /// A block grid of `nx × nz` blocks, 40 m apart, each holding a few objects
@@ -59,8 +59,8 @@ pub fn synthetic_job(nx: u32, nz: u32) -> Job {
 /// The geometry of a scene whose objects are solid boxes: each object is a
 /// closed, outward-facing cuboid filling its bounds (one mesh per object,
 /// one opaque single-sided material).
-pub fn box_geometry(scene: &Scene) -> crate::geometry::SceneGeometry {
-    use crate::geometry::{Instance, Material, MeshData, SceneGeometry};
+pub fn box_geometry(scene: &Scene) -> crate::scene::geometry::SceneGeometry {
+    use crate::scene::geometry::{Instance, Material, MeshData, SceneGeometry};
     use glam::{DAffine3, Vec3};
     let mut meshes = Vec::new();
     let mut instances = Vec::new();
@@ -119,7 +119,7 @@ pub fn box_geometry(scene: &Scene) -> crate::geometry::SceneGeometry {
 /// views over the target in solved problem views, and the job's text holds
 /// markup (`</pre><script>…`) to check escaping.
 pub fn sample_report() -> crate::report::Report {
-    use crate::placement::StageTime;
+    use crate::api::placement::StageTime;
     use crate::report::{
         EvalSummary, Machine, MethodStability, Perturbed, Report, Run, SceneInfo, Spread,
         Stability, Sweep, Walkthrough,

@@ -42,8 +42,8 @@ async fn main() -> std::io::Result<()> {
         lod: false,
     })
     .map_err(std::io::Error::other)?;
-    let scene =
-        optimizer::gltf_load::load_scene_bytes(&glb, "city").map_err(std::io::Error::other)?;
+    let scene = optimizer::scene::gltf_load::load_scene_bytes(&glb, "city")
+        .map_err(std::io::Error::other)?;
     let job: Value = serde_json::from_slice(&std::fs::read(concat!(
         env!("CARGO_MANIFEST_DIR"),
         "/../fixtures/jobs/vienna-reference.json"

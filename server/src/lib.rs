@@ -28,11 +28,11 @@ use axum::routing::get;
 use serde::Deserialize;
 use serde_json::{Value, json};
 
-use optimizer::job::Job;
+use optimizer::api::job::Job;
 
 pub mod client;
 pub mod openapi;
-use optimizer::pipeline::{Control, PlaceOptions, place_shared};
+use optimizer::place::{Control, PlaceOptions, place_shared};
 
 /// Version of the optimizer library this service is built against.
 pub const OPTIMIZER_VERSION: &str = optimizer::VERSION;
@@ -305,14 +305,14 @@ impl AppState {
         let scene_bytes = std::fs::read(dir.join("scene")).map_err(io(dir.join("scene")))?;
         let job_bytes = std::fs::read(dir.join("job.json")).map_err(io(dir.join("job.json")))?;
         let job = Job::from_json(&job_bytes, "job")?;
-        let scene = optimizer::gltf_load::load_scene_bytes(&scene_bytes, "scene")?;
+        let scene = optimizer::scene::gltf_load::load_scene_bytes(&scene_bytes, "scene")?;
         // Geometry when the job needs it, or for the evaluation's check of
         // the visible sets when the scene has any.
         let geometry = if optimizer::input::needs_geometry(&job)
-            || (job.visibility.mode != optimizer::job::VisibilityMode::None
+            || (job.visibility.mode != optimizer::api::job::VisibilityMode::None
                 && scene_bytes.starts_with(b"glTF"))
         {
-            Some(optimizer::geometry::load_geometry_bytes(
+            Some(optimizer::scene::geometry::load_geometry_bytes(
                 &scene_bytes,
                 "scene",
             )?)
@@ -344,7 +344,7 @@ impl AppState {
             cancel: Some(cancel),
             on_progress: Some(&progress),
         };
-        let hierarchy = optimizer::hierarchy::Hierarchy::build(&input.scene);
+        let hierarchy = optimizer::scene::hierarchy::Hierarchy::build(&input.scene);
         let visibility = optimizer::visibility::Visibility::new(
             &job,
             &input.scene,
@@ -411,7 +411,7 @@ impl AppState {
                 return Err(optimizer::Error::Cancelled);
             }
             progress("bake", 0.99);
-            let geom = optimizer::geometry::load_geometry_bytes(&scene_bytes, "scene")?;
+            let geom = optimizer::scene::geometry::load_geometry_bytes(&scene_bytes, "scene")?;
             let (glb, _) = optimizer::bake::bake(
                 &geom,
                 &job.memory,
@@ -450,13 +450,13 @@ impl AppState {
             }
         };
         let parsed = Job::from_json(job, "job").map_err(unprocessable)?;
-        let objects = optimizer::gltf_load::load_scene_bytes(scene, "scene")
+        let objects = optimizer::scene::gltf_load::load_scene_bytes(scene, "scene")
             .map_err(unprocessable)?
             .objects
             .len();
         if optimizer::input::needs_geometry(&parsed) && !scene.starts_with(b"glTF") {
             // A summary (or glTF JSON): check it has geometry at all.
-            optimizer::geometry::load_geometry_bytes(scene, "scene").map_err(|e| {
+            optimizer::scene::geometry::load_geometry_bytes(scene, "scene").map_err(|e| {
                 err(
                     StatusCode::UNPROCESSABLE_ENTITY,
                     format!("the job's visibility or lod.generate needs the scene's geometry: {e}"),
@@ -464,7 +464,7 @@ impl AppState {
             })?;
         }
         match (parsed.visibility.mode, pvs) {
-            (optimizer::job::VisibilityMode::Precomputed, None) => {
+            (optimizer::api::job::VisibilityMode::Precomputed, None) => {
                 return Err(err(
                     StatusCode::UNPROCESSABLE_ENTITY,
                     "job: visibility \"precomputed\" needs a `pvs` part (a PVS file)",
@@ -479,7 +479,8 @@ impl AppState {
         }
         if bake && !scene.starts_with(b"glTF") && scene.first() == Some(&b'{') {
             // A summary (or glTF JSON); baking needs geometry.
-            optimizer::geometry::load_geometry_bytes(scene, "scene").map_err(unprocessable)?;
+            optimizer::scene::geometry::load_geometry_bytes(scene, "scene")
+                .map_err(unprocessable)?;
         }
         if self.0.queued.load(Ordering::SeqCst) >= self.0.cfg.max_queue {
             return Err(err(
@@ -579,7 +580,7 @@ fn one_run_report(
     input: &optimizer::input::SceneInput,
     job_bytes: &[u8],
     job: &Job,
-    out: &optimizer::pipeline::PlaceOutput,
+    out: &optimizer::place::PlaceOutput,
     eval: &optimizer::evaluate::Evaluation,
     seconds: f64,
     frames: Vec<f64>,

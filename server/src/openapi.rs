@@ -1,6 +1,6 @@
 //! The OpenAPI 3.1 document of the service (`GET /openapi.json`). Request
 //! and result bodies use the JSON Schemas generated from the optimizer's
-//! Rust types ([`optimizer::schema`]); their `$defs` are hoisted into
+//! Rust types ([`optimizer::api::schema`]); their `$defs` are hoisted into
 //! `components/schemas`.
 
 use serde_json::{Map, Value, json};
@@ -40,7 +40,7 @@ fn with(mut base: Map<String, Value>, code: &str, v: Value) -> Value {
 /// The document.
 pub fn openapi() -> Value {
     let mut schemas = Map::new();
-    for (file, text) in optimizer::schema::all() {
+    for (file, text) in optimizer::api::schema::all() {
         let name = match file {
             "job.schema.json" => "Job",
             "scene.schema.json" => "SceneSummary",

@@ -106,10 +106,10 @@ async fn summary_and_glb_jobs_succeed_with_the_cli_bytes() {
     cfg.eval_views = 500;
     let addr = start(cfg).await;
     let glb = city(0.1);
-    let scene = optimizer::gltf_load::load_scene_bytes(&glb, "city").unwrap();
-    let job = optimizer::job::Job::from_json(&job_json(), "job").unwrap();
+    let scene = optimizer::scene::gltf_load::load_scene_bytes(&glb, "city").unwrap();
+    let job = optimizer::api::job::Job::from_json(&job_json(), "job").unwrap();
     let expected = optimizer::to_json_bytes(
-        &optimizer::pipeline::place(&scene, &job, &Default::default())
+        &optimizer::place::place(&scene, &job, &Default::default())
             .unwrap()
             .placement,
     )
@@ -239,7 +239,7 @@ async fn full_queue_and_cancellation() {
     cfg.max_queue = 0;
     let addr = start(cfg).await;
     let summary = serde_json::to_value(
-        optimizer::gltf_load::load_scene_bytes(&city(0.1), "c")
+        optimizer::scene::gltf_load::load_scene_bytes(&city(0.1), "c")
             .unwrap()
             .summary(),
     )
@@ -252,7 +252,7 @@ async fn full_queue_and_cancellation() {
     // A long job (the full city's reference) is cancelled promptly.
     let addr = start(Config::new(temp_dir("cancel"))).await;
     let summary = serde_json::to_value(
-        optimizer::gltf_load::load_scene_bytes(&city(1.0), "c")
+        optimizer::scene::gltf_load::load_scene_bytes(&city(1.0), "c")
             .unwrap()
             .summary(),
     )
@@ -292,23 +292,18 @@ async fn visibility_jobs_run_and_missing_inputs_are_refused() {
     ))
     .unwrap();
     // The CLI's placement of the same job.
-    let parsed = optimizer::job::Job::from_json(&job, "job").unwrap();
+    let parsed = optimizer::api::job::Job::from_json(&job, "job").unwrap();
     let input = optimizer::input::SceneInput::new(
-        optimizer::gltf_load::load_scene_bytes(&glb, "city").unwrap(),
-        Some(optimizer::geometry::load_geometry_bytes(&glb, "city").unwrap()),
+        optimizer::scene::gltf_load::load_scene_bytes(&glb, "city").unwrap(),
+        Some(optimizer::scene::geometry::load_geometry_bytes(&glb, "city").unwrap()),
         None,
         &parsed,
     )
     .unwrap();
     let expected = optimizer::to_json_bytes(
-        &optimizer::pipeline::place_input(
-            &input,
-            &parsed,
-            &Default::default(),
-            &Default::default(),
-        )
-        .unwrap()
-        .placement,
+        &optimizer::place::place_input(&input, &parsed, &Default::default(), &Default::default())
+            .unwrap()
+            .placement,
     )
     .unwrap();
     let (ct, body) = multipart(&[("scene", &glb), ("job", &job)]);
@@ -337,7 +332,7 @@ async fn visibility_jobs_run_and_missing_inputs_are_refused() {
 
     // Conservative visibility needs geometry: a summary is refused up front.
     let summary = serde_json::to_value(
-        optimizer::gltf_load::load_scene_bytes(&glb, "city")
+        optimizer::scene::gltf_load::load_scene_bytes(&glb, "city")
             .unwrap()
             .summary(),
     )

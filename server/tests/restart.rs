@@ -61,15 +61,15 @@ fn kill_9_and_restart_finishes_every_job() {
         lod: false,
     })
     .unwrap();
-    let scene = optimizer::gltf_load::load_scene_bytes(&glb, "c").unwrap();
+    let scene = optimizer::scene::gltf_load::load_scene_bytes(&glb, "c").unwrap();
     let job_bytes = std::fs::read(concat!(
         env!("CARGO_MANIFEST_DIR"),
         "/../fixtures/jobs/city-small.json"
     ))
     .unwrap();
-    let job = optimizer::job::Job::from_json(&job_bytes, "job").unwrap();
+    let job = optimizer::api::job::Job::from_json(&job_bytes, "job").unwrap();
     let expected = optimizer::to_json_bytes(
-        &optimizer::pipeline::place(&scene, &job, &Default::default())
+        &optimizer::place::place(&scene, &job, &Default::default())
             .unwrap()
             .placement,
     )

@@ -12,7 +12,7 @@ pub mod run;
 use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 
-use crate::placement::StageTime;
+use crate::api::placement::StageTime;
 
 /// A whole report (`report.json`).
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize, JsonSchema)]

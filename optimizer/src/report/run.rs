@@ -11,11 +11,11 @@ use super::{
     EvalSummary, Machine, MethodStability, Perturbed, Report, Run, SceneInfo, Spread, Stability,
     Sweep, Walkthrough,
 };
+use crate::api::job::{Job, Method};
 use crate::evaluate::{EvalOptions, Shared, evaluate_shared, frame_times, walkthrough_views};
-use crate::hierarchy::Hierarchy;
 use crate::input::SceneInput;
-use crate::job::{Job, Method};
-use crate::pipeline::{Control, PlaceOptions, place_shared};
+use crate::place::{Control, PlaceOptions, place_shared};
+use crate::scene::hierarchy::Hierarchy;
 use crate::visibility::Visibility;
 use crate::{Error, Result};
 

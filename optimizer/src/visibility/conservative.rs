@@ -54,9 +54,9 @@ use glam::DVec3;
 
 use super::ObjectSet;
 use super::occluders::OccluderBox;
-use crate::geom::Aabb;
-use crate::hierarchy::Hierarchy;
+use crate::math::geom::Aabb;
 use crate::scene::Scene;
+use crate::scene::hierarchy::Hierarchy;
 
 /// Azimuth bins around a sample point.
 pub const BINS: usize = 512;
@@ -930,7 +930,7 @@ mod property {
     //! object that some unobstructed segment from the region reaches is in
     //! the region's set.
     use super::*;
-    use crate::rng::Rng;
+    use crate::math::rng::Rng;
     use crate::scene::{Object, Scene};
     use crate::visibility::occluders;
 

@@ -30,12 +30,12 @@ use rayon::prelude::*;
 use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 
-use crate::geom::Aabb;
-use crate::hierarchy::Hierarchy;
-use crate::job::{Job, VisibilityMode};
-use crate::problem_views::Grid;
-use crate::raycast::RayCaster;
+use crate::api::job::{Job, VisibilityMode};
+use crate::math::geom::Aabb;
+use crate::render::raycast::RayCaster;
 use crate::scene::Scene;
+use crate::scene::hierarchy::Hierarchy;
+use crate::views::Grid;
 use crate::{Error, Result};
 
 /// A set of object ids (a bit set).
@@ -141,7 +141,7 @@ pub struct VisibilityInputs<'a> {
     /// Ray caster (sampled mode).
     pub caster: Option<&'a RayCaster>,
     /// The geometry the caster was built from (sampled mode's aimed rays).
-    pub geometry: Option<&'a crate::geometry::SceneGeometry>,
+    pub geometry: Option<&'a crate::scene::geometry::SceneGeometry>,
     /// A PVS file (precomputed mode).
     pub pvs: Option<&'a pvs::PvsFile>,
 }

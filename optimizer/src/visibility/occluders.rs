@@ -38,9 +38,9 @@ use rayon::prelude::*;
 use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 
-use crate::geom::Aabb;
-use crate::geometry::{AlphaMode, SceneGeometry};
+use crate::math::geom::Aabb;
 use crate::scene::Scene;
+use crate::scene::geometry::{AlphaMode, SceneGeometry};
 
 /// Voxels along the longest axis of a component's box.
 const VOXELS: usize = 16;

@@ -12,7 +12,7 @@ use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 
 use super::ObjectSet;
-use crate::geom::Aabb;
+use crate::math::geom::Aabb;
 use crate::{Error, Result};
 
 /// A PVS file.

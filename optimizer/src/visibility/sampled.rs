@@ -3,7 +3,7 @@
 //! Rays start at uniformly random points of the cell and go in uniformly
 //! random directions of the band of elevations any view can see (the pitch
 //! range widened by the frustum's half-diagonal). Every object a ray reaches
-//! before its first blocking surface (see [`crate::raycast`]) is visible;
+//! before its first blocking surface (see [`crate::render::raycast`]) is visible;
 //! objects that meet the cell always are. Objects no ray reaches are culled,
 //! so the set may miss objects that are visible through small gaps: the
 //! result is an estimate, reported with two measures of what was missed:
@@ -27,12 +27,12 @@ use std::sync::Arc;
 use glam::DVec3;
 
 use super::{CellVisibility, ObjectSet};
-use crate::geom::{Aabb, frustum_half_diagonal};
-use crate::geometry::SceneGeometry;
-use crate::job::Job;
-use crate::raycast::RayCaster;
-use crate::rng::Rng;
+use crate::api::job::Job;
+use crate::math::geom::{Aabb, frustum_half_diagonal};
+use crate::math::rng::Rng;
+use crate::render::raycast::RayCaster;
 use crate::scene::Scene;
+use crate::scene::geometry::SceneGeometry;
 
 /// Sampled visibility of one job.
 pub struct Sampled<'a> {

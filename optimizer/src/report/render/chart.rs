@@ -593,7 +593,7 @@ mod tests {
             f64::INFINITY,
             f64::NEG_INFINITY,
         ];
-        let mut rng = crate::rng::Rng::new(7);
+        let mut rng = crate::math::rng::Rng::new(7);
         let mut pick = || pool[(rng.next_u64() % pool.len() as u64) as usize];
         let mut drawn = 0;
         for i in 0..300 {

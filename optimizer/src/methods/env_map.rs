@@ -17,12 +17,12 @@
 use glam::DVec3;
 use rayon::prelude::*;
 
-use crate::cost::Cost;
-use crate::geom::{Aabb, Sphere, enclosing_cone, face_coords};
-use crate::impostor_model::ImpostorModel;
-use crate::job::Job;
-use crate::placement::{PlacedImpostor, SphereJson, ViewCellJson};
-use crate::problem_views::{Context, ProblemViews, RegionCosts, enclosed_cost};
+use crate::api::job::Job;
+use crate::api::placement::{PlacedImpostor, SphereJson, ViewCellJson};
+use crate::math::geom::{Aabb, Sphere, enclosing_cone, face_coords};
+use crate::model::cost::Cost;
+use crate::model::impostor::ImpostorModel;
+use crate::views::{Context, ProblemViews, RegionCosts, enclosed_cost};
 use crate::visibility::ObjectSet;
 
 /// The impostors of one environment-map cell.

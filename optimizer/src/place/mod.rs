@@ -6,19 +6,19 @@ use std::time::Instant;
 
 use indicatif::{ProgressBar, ProgressStyle};
 
-use crate::candidates::{self, Candidates};
-pub use crate::evaluate::Shared;
-use crate::greedy::{self, Selection};
-use crate::hierarchy::Hierarchy;
-use crate::impostor_model::ViewCell;
-use crate::input::SceneInput;
-use crate::job::{Job, Method};
-use crate::placement::{
+use crate::api::job::{Job, Method};
+use crate::api::placement::{
     DirectionsJson, PlacedCpv, PlacedImpostor, Placement, RegionJson, SphereJson, StageTime, Stats,
     Summary, ViewCellJson, peak_rss_bytes,
 };
-use crate::problem_views::{self, Context, ProblemViews};
+use crate::candidates::{self, Candidates};
+pub use crate::evaluate::Shared;
+use crate::greedy::{self, Selection};
+use crate::input::SceneInput;
+use crate::model::impostor::ViewCell;
 use crate::scene::Scene;
+use crate::scene::hierarchy::Hierarchy;
+use crate::views::{self, Context, ProblemViews};
 use crate::visibility::Visibility;
 use crate::{Error, Result};
 
@@ -32,7 +32,7 @@ pub struct PlaceOptions {
     /// Print each stage's wall time to stderr as it finishes.
     pub verbose: bool,
     /// Budget of (CPV, cluster) pairs; `None` is
-    /// [`problem_views::MAX_PAIRS`].
+    /// [`views::MAX_PAIRS`].
     pub max_pairs: Option<u64>,
 }
 
@@ -208,10 +208,10 @@ pub fn place_shared(
     ctl.progress("problem_views", 0.01);
     st.begin("approximating the problem view space");
     let mut ctx = Context::new(scene, hierarchy, job);
-    ctx.pair_budget = opts.max_pairs.unwrap_or(problem_views::MAX_PAIRS);
+    ctx.pair_budget = opts.max_pairs.unwrap_or(views::MAX_PAIRS);
     ctx.cancel = ctl.cancel;
     ctx.visibility = visibility;
-    let pv = problem_views::approximate(&ctx, job);
+    let pv = views::approximate(&ctx, job);
     st.end("problem_views");
     if ctx.over_budget() {
         return Err(Error::bad(
@@ -221,7 +221,7 @@ pub fn place_shared(
                  raise target_frame_time_ms, enlarge problem_views.cell_size or min_vdi_deg, or shrink \
                  the view space",
                 ctx.pair_budget,
-                ctx.pair_budget * problem_views::BYTES_PER_PAIR / 1_000_000_000
+                ctx.pair_budget * views::BYTES_PER_PAIR / 1_000_000_000
             ),
         ));
     }
@@ -230,7 +230,7 @@ pub fn place_shared(
     if method == Method::EnvMap {
         ctl.progress("env_map", 0.1);
         st.begin("placing environment maps");
-        let em = crate::env_map::place(&ctx, job, &pv);
+        let em = crate::methods::env_map::place(&ctx, job, &pv);
         st.end("env_map");
         ctl.check()?;
         st.begin("writing the placement");
@@ -407,7 +407,7 @@ pub fn assemble(
     pv: &ProblemViews,
     impostors: Vec<PlacedImpostor>,
     cpv_impostors: Vec<Vec<u32>>,
-    cpv_cost: &[crate::cost::Cost],
+    cpv_cost: &[crate::model::cost::Cost],
     candidates: u64,
 ) -> Placement {
     let mut unsolved = 0u64;
@@ -456,12 +456,12 @@ pub fn assemble(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::api::job::Method;
     use crate::evaluate::{EvalOptions, evaluate};
-    use crate::job::Method;
     use crate::testutil::{synthetic_city, synthetic_job};
 
     /// The impostors of CPV `c` represent no object twice.
-    fn assert_no_object_twice(p: &Placement, c: &crate::placement::PlacedCpv, what: &str) {
+    fn assert_no_object_twice(p: &Placement, c: &crate::api::placement::PlacedCpv, what: &str) {
         let mut objs: Vec<u32> = c
             .impostors
             .iter()
@@ -623,12 +623,12 @@ mod tests {
         let job = synthetic_job(5, 5);
         let h = Hierarchy::build(&scene);
         let mut ctx = Context::new(&scene, &h, &job);
-        let pv = problem_views::approximate(&ctx, &job);
+        let pv = views::approximate(&ctx, &job);
         assert!(!pv.cpvs.is_empty());
         let flag = AtomicBool::new(true);
         ctx.cancel = Some(&flag);
         assert!(candidates::generate(&ctx, &job, &pv).list.is_empty());
-        assert!(problem_views::approximate(&ctx, &job).cpvs.is_empty());
+        assert!(views::approximate(&ctx, &job).cpvs.is_empty());
     }
 
     #[test]
@@ -677,10 +677,10 @@ mod tests {
     fn every_candidate_contains_the_regions_it_serves() {
         let scene = synthetic_city(5, 5, 5);
         let mut job = synthetic_job(5, 5);
-        job.candidates.view_cells = crate::job::ViewCellKind::Both;
+        job.candidates.view_cells = crate::api::job::ViewCellKind::Both;
         let h = Hierarchy::build(&scene);
         let ctx = Context::new(&scene, &h, &job);
-        let pv = problem_views::approximate(&ctx, &job);
+        let pv = views::approximate(&ctx, &job);
         let cands = candidates::generate(&ctx, &job, &pv);
         let mut checked = 0;
         for (i, c) in cands.list.iter().enumerate() {
@@ -719,10 +719,10 @@ mod tests {
         for seed in [1, 4, 7] {
             let scene = synthetic_city(seed, 4, 3);
             let mut job = synthetic_job(4, 3);
-            job.candidates.view_cells = crate::job::ViewCellKind::Both;
+            job.candidates.view_cells = crate::api::job::ViewCellKind::Both;
             let h = Hierarchy::build(&scene);
             let ctx = Context::new(&scene, &h, &job);
-            let pv = problem_views::approximate(&ctx, &job);
+            let pv = views::approximate(&ctx, &job);
             let cands = candidates::generate(&ctx, &job, &pv);
             assert!(!cands.list.is_empty());
             let lazy = greedy::select_lazy(&ctx, &pv, &cands, &mut |_| true);

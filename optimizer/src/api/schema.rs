@@ -3,9 +3,9 @@
 
 use schemars::schema_for;
 
+use crate::api::job::Job;
+use crate::api::placement::{Placement, Stats};
 use crate::evaluate::Evaluation;
-use crate::job::Job;
-use crate::placement::{Placement, Stats};
 use crate::scene::SceneSummary;
 use crate::visibility::pvs::PvsFile;
 

@@ -538,7 +538,7 @@ pub fn projected_area_px(r: f64, d: f64, focal_px: f64, screen_px: f64) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::rng::Rng;
+    use crate::math::rng::Rng;
 
     #[test]
     fn face_coords_round_trip_and_edge_rule() {

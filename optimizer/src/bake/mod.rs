@@ -28,12 +28,12 @@ use rayon::prelude::*;
 use serde::Serialize;
 use serde_json::json;
 
-use crate::geom::Aabb;
-use crate::geometry::{AlphaMode, SceneGeometry};
-use crate::glb::{self, GlbBuilder, MeshPrimitive, MinFilter, Node, Sampler};
-use crate::job::MemoryParams;
-use crate::placement::{PlacedImpostor, Placement, ViewCellJson};
-use crate::raster::{Raster, Surface, TextureRef, Vertex, View};
+use crate::api::job::MemoryParams;
+use crate::api::placement::{PlacedImpostor, Placement, ViewCellJson};
+use crate::math::geom::Aabb;
+use crate::render::raster::{Raster, Surface, TextureRef, Vertex, View};
+use crate::scene::geometry::{AlphaMode, SceneGeometry};
+use crate::scene::glb::{self, GlbBuilder, MeshPrimitive, MinFilter, Node, Sampler};
 use crate::{Error, Result};
 
 /// Baking options.
@@ -145,7 +145,12 @@ fn slabs(imp: &PlacedImpostor) -> (DVec3, Vec<(f64, f64, f64)>) {
 /// end, half out to 16 times its minimum distance, half on its rim).
 /// Independent of the layer formula that chose the layer count, so it checks
 /// the image quality criterion: at most `max_error_px` pixel angles.
-pub fn parallax(imp: &PlacedImpostor, rng: &mut crate::rng::Rng, points: u32, views: u32) -> f64 {
+pub fn parallax(
+    imp: &PlacedImpostor,
+    rng: &mut crate::math::rng::Rng,
+    points: u32,
+    views: u32,
+) -> f64 {
     let c = DVec3::from_array(imp.sphere.center);
     let r = imp.sphere.radius;
     let (eye, slabs) = slabs(imp);
@@ -538,7 +543,7 @@ pub fn render_layers(
 /// a layer quad whose texels are cut out of its atlas by its UVs. The file
 /// is loaded with the safe geometry loader; `source` names it in errors.
 pub fn read_layers(bytes: &[u8], source: &str) -> Result<Vec<Layer>> {
-    let geom = crate::geometry::load_geometry_bytes(bytes, source)?;
+    let geom = crate::scene::geometry::load_geometry_bytes(bytes, source)?;
     let ids = impostor_ids(bytes, source)?;
     let mut layers = Vec::new();
     let bad = |m: String| Error::bad(source, m);
@@ -765,7 +770,7 @@ pub fn bake(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::placement::SphereJson;
+    use crate::api::placement::SphereJson;
 
     fn shaft_impostor(layers: u32) -> PlacedImpostor {
         PlacedImpostor {
@@ -828,7 +833,7 @@ mod tests {
         let mut last = f64::INFINITY;
         for layers in [1, 4, 16, 64] {
             imp.layers = layers;
-            let p = parallax(&imp, &mut crate::rng::Rng::new(5), 64, 64);
+            let p = parallax(&imp, &mut crate::math::rng::Rng::new(5), 64, 64);
             assert!(p > 0.0 && p < last, "{layers} layers: {p}");
             last = p;
         }
@@ -844,7 +849,7 @@ mod tests {
             min: [-1.0, -1.0, -1e-9],
             max: [1.0, 1.0, 1e-9],
         };
-        let p = parallax(&imp, &mut crate::rng::Rng::new(1), 256, 64);
+        let p = parallax(&imp, &mut crate::math::rng::Rng::new(1), 256, 64);
         assert!(p > 0.008 && p < 1.0 / 9.0, "{p}");
     }
 
@@ -853,14 +858,14 @@ mod tests {
         // The design's layer counts (small-angle approximations) against
         // the geometry the bake draws, where placements use them: shafts
         // at least 8 radii away, boxes at least 3 half-diagonals away.
-        let job = crate::job::Job::with_view_space([0.0; 3], [1.0; 3]);
-        let model = crate::impostor_model::ImpostorModel::new(&job);
+        let job = crate::api::job::Job::with_view_space([0.0; 3], [1.0; 3]);
+        let model = crate::model::impostor::ImpostorModel::new(&job);
         let theta = job.pixel_angle();
-        let mut rng = crate::rng::Rng::new(9);
+        let mut rng = crate::math::rng::Rng::new(9);
         let mut worst: f64 = 0.0;
         for i in 0..60 {
             let r = rng.range(1.0, 40.0);
-            let sphere = crate::geom::Sphere {
+            let sphere = crate::math::geom::Sphere {
                 center: DVec3::ZERO,
                 radius: r,
             };
@@ -887,7 +892,7 @@ mod tests {
                     rng.range(5.0, 50.0),
                 );
                 let at = rng.unit_vector() * (half.length() * rng.range(3.0, 20.0) + r);
-                let cell = crate::geom::Aabb::new(at - half, at + half);
+                let cell = crate::math::geom::Aabb::new(at - half, at + half);
                 let Some(spec) = model.boxed(&sphere, &cell) else {
                     continue;
                 };
@@ -910,7 +915,7 @@ mod tests {
 
     #[test]
     fn packing_never_overlaps_and_stays_inside() {
-        let mut rng = crate::rng::Rng::new(3);
+        let mut rng = crate::math::rng::Rng::new(3);
         let sizes: Vec<u32> = (0..300)
             .map(|_| 4 + (rng.next_u64() % 200) as u32)
             .collect();

@@ -16,12 +16,12 @@
 //! is in `[c_i, c_{i−1})` (with `c_{−1} = 1`), nothing below the last value.
 //! Screen coverage is read in this tool's convention: the projected area of
 //! the object's bounding sphere over the screen area
-//! ([`crate::cost::CostModel::coverage`]). The rules:
+//! ([`crate::model::cost::CostModel::coverage`]). The rules:
 //!
 //! * Nodes named in some node's `MSFT_lod.ids` are levels of detail, not
 //!   objects: wherever they appear in the scene, they and their subtrees are
 //!   skipped, so object ids (DESIGN §5) count real objects only. Both this
-//!   loader and [`crate::geometry`] walk the scene with the same function, so
+//!   loader and [`crate::scene::geometry`] walk the scene with the same function, so
 //!   their ids agree.
 //! * A level node takes the object's place: its world transform is the
 //!   object node's parent world transform × the level node's local
@@ -41,7 +41,7 @@
 //! * `MSFT_lod` on materials is ignored (placement never reads materials).
 //!
 //! Levels are always loaded; a job with `lod.enabled = false` clears them
-//! with [`crate::lod::strip_lods`].
+//! with [`crate::scene::lod::strip_lods`].
 //!
 //! The input is untrusted (HTTP uploads), so the loader
 //!
@@ -2279,7 +2279,7 @@ mod tests {
             d.json["nodes"][1]["extensions"]["MSFT_lod"]["ids"] = ids.clone();
             for message in [
                 load_err(&d.glb()),
-                crate::geometry::load_geometry_bytes(&d.glb(), "t.glb")
+                crate::scene::geometry::load_geometry_bytes(&d.glb(), "t.glb")
                     .unwrap_err()
                     .to_string(),
             ] {
@@ -2312,7 +2312,7 @@ mod tests {
         let scene = load(&glb).unwrap();
         let names: Vec<&str> = scene.objects.iter().map(|o| o.name.as_str()).collect();
         assert_eq!(names, ["base", "plain"]);
-        let geom = crate::geometry::load_geometry_bytes(&glb, "t.glb").unwrap();
+        let geom = crate::scene::geometry::load_geometry_bytes(&glb, "t.glb").unwrap();
         assert_eq!(geom.object_count(), 2);
         // Level 0 geometry only: one cube primitive per object, placed at the
         // object's own node.

@@ -8,7 +8,7 @@ use std::time::Duration;
 use glam::Vec3A;
 use obvhs::{BvhBuildParams, aabb::Aabb as BAabb, bvh2::builder::build_bvh2};
 
-use crate::geom::{Aabb, Sphere};
+use crate::math::geom::{Aabb, Sphere};
 use crate::scene::Scene;
 
 /// Largest number of objects in a leaf cluster.

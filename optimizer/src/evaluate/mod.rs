@@ -16,6 +16,8 @@
 //! find objects that are actually visible; any such object missing from the
 //! set is counted in `visibility.missed_objects` (0 in conservative mode).
 
+pub mod images;
+
 use std::collections::HashMap;
 
 use glam::DVec3;
@@ -23,19 +25,19 @@ use rayon::prelude::*;
 use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 
-use crate::cost::{Cost, CostModel};
+use crate::api::job::{Job, VisibilityMode};
+use crate::api::placement::{Placement, ViewCellJson};
 use crate::error::{Error, Result};
-use crate::geom::{Aabb, Sphere, Vdi, ViewFrustum, face_direction};
-use crate::geometry::SceneGeometry;
-use crate::hierarchy::Hierarchy;
-use crate::impostor_model::ViewCell;
 use crate::input::SceneInput;
-use crate::job::{Job, VisibilityMode};
-use crate::placement::{Placement, ViewCellJson};
-use crate::problem_views::{Grid, leaf_level};
-use crate::raycast::RayCaster;
-use crate::rng::Rng;
+use crate::math::geom::{Aabb, Sphere, Vdi, ViewFrustum, face_direction};
+use crate::math::rng::Rng;
+use crate::model::cost::{Cost, CostModel};
+use crate::model::impostor::ViewCell;
+use crate::render::raycast::RayCaster;
 use crate::scene::Scene;
+use crate::scene::geometry::SceneGeometry;
+use crate::scene::hierarchy::Hierarchy;
+use crate::views::{Grid, leaf_level};
 use crate::visibility::{ObjectSet, Visibility};
 
 /// Options of an evaluation.
@@ -162,7 +164,7 @@ pub struct Evaluation {
     pub mean_slack_ms: f64,
     /// Image error of the impostors (`evaluate --images N`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub image: Option<crate::image_eval::ImageReport>,
+    pub image: Option<crate::evaluate::images::ImageReport>,
     /// The visibility used and its check (absent without visibility).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub visibility: Option<VisibilityCheck>,

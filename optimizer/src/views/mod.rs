@@ -13,13 +13,13 @@
 
 use glam::DVec3;
 
-use crate::cost::{Cost, CostModel};
+use crate::model::cost::{Cost, CostModel};
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering as AtomicOrdering};
 
-use crate::geom::{Aabb, Cone, Vdi, enclosing_cone, frustum_half_diagonal};
-use crate::hierarchy::Hierarchy;
-use crate::job::Job;
+use crate::api::job::Job;
+use crate::math::geom::{Aabb, Cone, Vdi, enclosing_cone, frustum_half_diagonal};
 use crate::scene::Scene;
+use crate::scene::hierarchy::Hierarchy;
 use crate::visibility::{ObjectSet, Visibility};
 
 /// The grid of minimum-size 3D cells over the view space.
@@ -253,8 +253,8 @@ impl<'a> Context<'a> {
     /// Level-of-detail counters (`None` when no object has levels).
     pub fn lod_stats(
         &self,
-        generated: Option<crate::lod::LodReport>,
-    ) -> Option<crate::placement::LodStats> {
+        generated: Option<crate::scene::lod::LodReport>,
+    ) -> Option<crate::api::placement::LodStats> {
         let with = self
             .scene
             .objects
@@ -276,7 +276,7 @@ impl<'a> Context<'a> {
             .map(|a| a.load(AtomicOrdering::Relaxed))
             .collect();
         chosen.push(self.lod_levels[crate::scene::MAX_LODS].load(AtomicOrdering::Relaxed));
-        Some(crate::placement::LodStats {
+        Some(crate::api::placement::LodStats {
             objects_with_lods: with as u64,
             chosen_levels: chosen,
             generated,
@@ -648,8 +648,8 @@ pub fn enclosing_time(ctx: &Context, region: &Aabb, vdi: &Vdi) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::geom::{ViewFrustum, face_direction};
-    use crate::rng::Rng;
+    use crate::math::geom::{ViewFrustum, face_direction};
+    use crate::math::rng::Rng;
     use crate::scene::Object;
 
     /// Property: every object hit by an exact view frustum at a sampled

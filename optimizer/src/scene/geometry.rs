@@ -1,6 +1,6 @@
 //! Scene geometry for rendering: triangles, normals, texture coordinates and
 //! base-colour materials of a glTF scene, read with the same safety rules and
-//! the same object ids as [`crate::gltf_load`] (which reads bounds only).
+//! the same object ids as [`crate::scene::gltf_load`] (which reads bounds only).
 //! Only full detail is read: `MSFT_lod` level nodes are not objects (the
 //! shared scene walk skips them) and their meshes are not loaded.
 //!
@@ -23,7 +23,7 @@ use glam::{DAffine3, Vec2, Vec3};
 use gltf::accessor::{DataType, Dimensions};
 use gltf::mesh::Mode;
 
-use crate::gltf_load::{
+use crate::scene::gltf_load::{
     AccessorBytes, base_dir_of, check_glb_header, check_indices, checked_accessor, gltf_error,
     guarded, precheck_root_with, read_uri, resolve_buffers, type_name, walk_scene,
 };
@@ -118,9 +118,9 @@ pub struct Texture {
     /// RGBA8 (sRGB colour), rows from the top.
     pub rgba: Vec<u8>,
     /// Wrapping of `u`.
-    pub wrap_s: crate::raster::Wrap,
+    pub wrap_s: crate::render::raster::Wrap,
     /// Wrapping of `v`.
-    pub wrap_t: crate::raster::Wrap,
+    pub wrap_t: crate::render::raster::Wrap,
 }
 
 impl SceneGeometry {
@@ -261,8 +261,8 @@ fn load_inner(bytes: &[u8], source: &str, base_dir: Option<&Path>) -> Result<Sce
     })
 }
 
-fn wrap(m: gltf::texture::WrappingMode) -> crate::raster::Wrap {
-    use crate::raster::Wrap;
+fn wrap(m: gltf::texture::WrappingMode) -> crate::render::raster::Wrap {
+    use crate::render::raster::Wrap;
     match m {
         gltf::texture::WrappingMode::ClampToEdge => Wrap::ClampToEdge,
         gltf::texture::WrappingMode::MirroredRepeat => Wrap::MirroredRepeat,
@@ -538,7 +538,7 @@ impl SceneGeometry {
         range: (usize, usize),
         eye: glam::DVec3,
         tries: u32,
-        rng: &mut crate::rng::Rng,
+        rng: &mut crate::math::rng::Rng,
         keep: impl Fn(glam::DVec3) -> bool,
     ) -> Option<glam::DVec3> {
         let insts = self.instances.get(range.0..range.1)?;
@@ -588,7 +588,7 @@ impl SceneGeometry {
 mod tests {
     use super::*;
     use crate::citygen::{CityParams, generate};
-    use crate::gltf_load::load_scene_bytes;
+    use crate::scene::gltf_load::load_scene_bytes;
 
     #[test]
     fn city_geometry_matches_the_scene() {
@@ -632,7 +632,7 @@ mod tests {
 
     #[test]
     fn textured_quad_reads_material_texture_and_uvs() {
-        use crate::glb::{self, GlbBuilder, Node, Sampler};
+        use crate::scene::glb::{self, GlbBuilder, Node, Sampler};
         let texels = [
             255u8, 0, 0, 255, 0, 255, 0, 255, 0, 0, 255, 255, 255, 255, 255, 128,
         ];
@@ -690,7 +690,7 @@ mod tests {
         let t = &geom.textures[mat.base_color_texture.unwrap() as usize];
         assert_eq!((t.width, t.height), (2, 2));
         assert_eq!(t.rgba, texels);
-        assert_eq!(t.wrap_s, crate::raster::Wrap::ClampToEdge);
+        assert_eq!(t.wrap_s, crate::render::raster::Wrap::ClampToEdge);
     }
 
     #[test]
@@ -707,7 +707,7 @@ mod tests {
             lod: false,
         })
         .unwrap();
-        let mut rng = crate::rng::Rng::new(7);
+        let mut rng = crate::math::rng::Rng::new(7);
         for _ in 0..200 {
             let mut b = glb.clone();
             let i = (rng.next_u64() % b.len() as u64) as usize;

@@ -29,10 +29,10 @@ use std::f64::consts::PI;
 use glam::DVec3;
 use rayon::prelude::*;
 
-use crate::geom::Aabb;
-use crate::impostor_model::{ImpostorModel, ImpostorSpec, ViewCell};
-use crate::job::{Job, Method};
-use crate::problem_views::{Context, ProblemViews};
+use crate::api::job::{Job, Method};
+use crate::math::geom::Aabb;
+use crate::model::impostor::{ImpostorModel, ImpostorSpec, ViewCell};
+use crate::views::{Context, ProblemViews};
 
 /// One impostor candidate.
 #[derive(Clone, Debug)]

@@ -19,7 +19,7 @@
 //!   `max_error_px` pixels: from the distance `d_k = e_k · focal_px /
 //!   max_error_px`. Level `k − 1`'s [`LodLevel::min_coverage`] is the screen
 //!   coverage of the object's bounding sphere at `d_k` (projected area over
-//!   screen area, as [`crate::cost::CostModel::coverage`]); the last level's
+//!   screen area, as [`crate::model::cost::CostModel::coverage`]); the last level's
 //!   is 0, so generated levels are never culled;
 //! * a level is kept only when it has fewer triangles and a strictly larger
 //!   error than the previous kept level and a strictly smaller, positive
@@ -39,10 +39,10 @@ use rayon::prelude::*;
 use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 
+use crate::api::job::LodParams;
 use crate::error::{Error, Result};
-use crate::geom::projected_area_px;
-use crate::geometry::{MeshData, SceneGeometry};
-use crate::job::LodParams;
+use crate::math::geom::projected_area_px;
+use crate::scene::geometry::{MeshData, SceneGeometry};
 use crate::scene::{LodLevel, Scene};
 
 /// Most generated levels below the full-detail one (objects have at most 32
@@ -383,8 +383,8 @@ fn max_stretch(m: DMat3) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::geometry::Instance;
     use crate::scene::Object;
+    use crate::scene::geometry::Instance;
     use glam::{DAffine3, DQuat, DVec3};
 
     /// A UV sphere of radius 1 with `rings × sides` quads, shared vertices.

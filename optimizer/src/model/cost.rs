@@ -13,8 +13,8 @@
 //! area over the screen area, [`CostModel::coverage`]; the pixel term always
 //! uses the object's bounding sphere, whatever the level.
 
-use crate::geom::projected_area_px;
-use crate::job::{Combine, Job};
+use crate::api::job::{Combine, Job};
+use crate::math::geom::projected_area_px;
 use crate::scene::Object;
 
 /// A cost in milliseconds, split into CPU and GPU parts.
@@ -333,7 +333,7 @@ mod tests {
 
     #[test]
     fn region_cost_bounds_every_farther_view() {
-        use crate::rng::Rng;
+        use crate::math::rng::Rng;
         use crate::scene::LodLevel;
         let mut rng = Rng::new(11);
         for combine in [Combine::Sum, Combine::Max, Combine::Primitives] {

@@ -37,7 +37,7 @@
 //! default camera (512 pixels high, 45° field of view: `f = 256 / tan 22.5°`);
 //! level `k − 1`'s value is the screen coverage of the object's bounding
 //! sphere at `d_k` (projected area over 512², as
-//! [`crate::geom::projected_area_px`]). The last level's value is 0: it is
+//! [`crate::math::geom::projected_area_px`]). The last level's value is 0: it is
 //! never culled, so levels change cost, never visibility.
 
 use std::collections::BTreeMap;
@@ -46,8 +46,8 @@ use std::f32::consts::{PI, TAU};
 use serde_json::json;
 
 use crate::error::{Error, Result};
-use crate::glb::{Geometry, GeometryId, GlbBuilder, Material, MeshPrimitive, Node};
-use crate::rng::Rng;
+use crate::math::rng::Rng;
+use crate::scene::glb::{Geometry, GeometryId, GlbBuilder, Material, MeshPrimitive, Node};
 
 /// Generator parameters.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -711,7 +711,7 @@ impl ProtoLod {
         let f = default_focal_px();
         let coverage = |e: f64| {
             let d = e * grow * f / LOD_ERROR_PX;
-            crate::geom::projected_area_px(radius, d, f, SCREEN_PX) / SCREEN_PX
+            crate::math::geom::projected_area_px(radius, d, f, SCREEN_PX) / SCREEN_PX
         };
         [coverage(self.errors[0]), coverage(self.errors[1]), 0.0]
     }
@@ -1197,8 +1197,8 @@ pub fn generate(params: &CityParams) -> Result<Vec<u8>> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::geometry::load_geometry_bytes;
-    use crate::gltf_load::load_scene_bytes;
+    use crate::scene::geometry::load_geometry_bytes;
+    use crate::scene::gltf_load::load_scene_bytes;
     use glam::DVec3;
 
     fn city(seed: u64, scale: f64, lod: bool) -> Vec<u8> {
@@ -1568,7 +1568,7 @@ pub fn generate_failure(seed: u64) -> Result<Vec<u8>> {
 #[cfg(test)]
 mod failure_tests {
     use super::*;
-    use crate::gltf_load::load_scene_bytes;
+    use crate::scene::gltf_load::load_scene_bytes;
 
     #[test]
     fn the_failure_scene_has_heavy_statues_next_to_the_street() {

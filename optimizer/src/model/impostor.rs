@@ -14,8 +14,8 @@
 
 use glam::DVec3;
 
-use crate::geom::{Aabb, Cone, Sphere};
-use crate::job::Job;
+use crate::api::job::Job;
+use crate::math::geom::{Aabb, Cone, Sphere};
 
 /// Most layers an impostor may have; more means the view cell is far too
 /// close for a layered impostor to be worth its memory.

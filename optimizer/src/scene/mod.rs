@@ -1,8 +1,14 @@
 //! The scene: objects with world bounds and rendering costs.
 //!
 //! Placement needs bounds and costs only, so a [`Scene`] holds no geometry.
-//! It is built from a glTF file ([`crate::gltf_load`]) or from a JSON scene
+//! It is built from a glTF file ([`crate::scene::gltf_load`]) or from a JSON scene
 //! summary ([`SceneSummary`]).
+
+pub mod geometry;
+pub mod glb;
+pub mod gltf_load;
+pub mod hierarchy;
+pub mod lod;
 
 use glam::DVec3;
 use schemars::JsonSchema;

@@ -27,9 +27,9 @@ use std::collections::BinaryHeap;
 use rayon::prelude::*;
 
 use crate::candidates::{Candidate, Candidates};
-use crate::cost::Cost;
-use crate::geom::Sphere;
-use crate::problem_views::{Context, Cpv, ProblemViews};
+use crate::math::geom::Sphere;
+use crate::model::cost::Cost;
+use crate::views::{Context, Cpv, ProblemViews};
 
 /// The selection: which candidates are impostors and where they are used.
 #[derive(Clone, Debug)]
@@ -546,9 +546,9 @@ pub fn prune(ctx: &Context, pv: &ProblemViews, cands: &Candidates, sel: &mut Sel
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::hierarchy::Hierarchy;
-    use crate::problem_views;
+    use crate::scene::hierarchy::Hierarchy;
     use crate::testutil::{synthetic_city, synthetic_job};
+    use crate::views;
 
     #[test]
     fn block_scores_equal_single_scores_bit_for_bit() {
@@ -556,7 +556,7 @@ mod tests {
         let job = synthetic_job(5, 5);
         let h = Hierarchy::build(&scene);
         let ctx = Context::new(&scene, &h, &job);
-        let pv = problem_views::approximate(&ctx, &job);
+        let pv = views::approximate(&ctx, &job);
         let cands = crate::candidates::generate(&ctx, &job, &pv);
         let mut st = State::new(&ctx, &pv, &cands);
         let blocks = blocks(&cands.list);

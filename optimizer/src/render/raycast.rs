@@ -31,7 +31,7 @@ use obvhs::aabb::Aabb;
 use obvhs::bvh2::builder::build_bvh2;
 use rayon::prelude::*;
 
-use crate::geometry::{AlphaMode, Material, MeshData, SceneGeometry};
+use crate::scene::geometry::{AlphaMode, Material, MeshData, SceneGeometry};
 
 /// A ray's hit on a surface.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -864,8 +864,8 @@ mod tests {
     use glam::{DQuat, Vec3};
 
     use super::*;
-    use crate::geometry::Instance;
-    use crate::rng::Rng;
+    use crate::math::rng::Rng;
+    use crate::scene::geometry::Instance;
 
     fn mesh(positions: Vec<Vec3>, indices: Vec<u32>, material: u32) -> MeshData {
         MeshData {

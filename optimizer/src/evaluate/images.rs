@@ -21,13 +21,13 @@ use rayon::prelude::*;
 use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 
+use crate::api::job::Job;
+use crate::api::placement::Placement;
 use crate::bake::{Layer, cluster_triangles, geom_objects, surface};
-use crate::geom::{ViewFrustum, face_direction};
-use crate::geometry::SceneGeometry;
-use crate::job::Job;
-use crate::placement::Placement;
-use crate::raster::{Raster, Surface, TextureRef, Vertex, View, Wrap};
-use crate::rng::Rng;
+use crate::math::geom::{ViewFrustum, face_direction};
+use crate::math::rng::Rng;
+use crate::render::raster::{Raster, Surface, TextureRef, Vertex, View, Wrap};
+use crate::scene::geometry::SceneGeometry;
 use crate::{Error, Result};
 
 /// Options of the image comparison.

@@ -1278,7 +1278,7 @@ mod tests {
             json!({ "ids": [l1, l2] })
         );
         // The scene loader reads the chain back.
-        let loaded = crate::gltf_load::load_scene_bytes(&bytes, "lod.glb").unwrap();
+        let loaded = crate::scene::gltf_load::load_scene_bytes(&bytes, "lod.glb").unwrap();
         assert_eq!(loaded.objects.len(), 2);
         let levels: Vec<(f64, u64)> = loaded.objects[0]
             .lods

@@ -1,0 +1,7 @@
+//! The wire types: every JSON file the tool reads or writes (job, scene
+//! summary, placement, stats, evaluation, PVS) and their JSON Schemas.
+//! Imports no pipeline stage.
+
+pub mod job;
+pub mod placement;
+pub mod schema;
