@@ -1,6 +1,7 @@
 //! End-to-end tests of the `impostor` command line: the pipeline on generated
 //! and real scenes, bad input, determinism and the JSON Schemas.
 
+mod architecture;
 mod bad_input;
 mod bake;
 mod cli;

@@ -6,13 +6,13 @@ use std::process::ExitCode;
 use clap::{Parser, Subcommand};
 use optimizer::api::job::{Job, MemoryParams, Method, VisibilityMode};
 use optimizer::api::placement::Placement;
+use optimizer::api::pvs::{PvsCell, PvsFile};
 use optimizer::api::schema;
 use optimizer::evaluate::images as image_eval;
 use optimizer::evaluate::{EvalOptions, evaluate_input};
 use optimizer::input::{SceneInput, needs_geometry};
 use optimizer::place::{Control, PlaceOptions, place_input};
 use optimizer::scene::{geometry, gltf_load};
-use optimizer::visibility::pvs::{PvsCell, PvsFile};
 use optimizer::{Error, Result, bake, citygen, report};
 
 /// Automatic impostor placement for guaranteed frame rates and low memory.

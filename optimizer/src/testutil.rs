@@ -119,7 +119,7 @@ pub fn box_geometry(scene: &Scene) -> crate::scene::geometry::SceneGeometry {
 /// views over the target in solved problem views, and the job's text holds
 /// markup (`</pre><script>…`) to check escaping.
 pub fn sample_report() -> crate::report::Report {
-    use crate::api::placement::StageTime;
+    use crate::api::stats::StageTime;
     use crate::report::{
         EvalSummary, Machine, MethodStability, Perturbed, Report, Run, SceneInfo, Spread,
         Stability, Sweep, Walkthrough,

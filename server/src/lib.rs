@@ -322,9 +322,7 @@ impl AppState {
         let pvs_path = dir.join("pvs.json");
         let pvs = if pvs_path.exists() {
             let bytes = std::fs::read(&pvs_path).map_err(io(pvs_path.clone()))?;
-            Some(optimizer::visibility::pvs::PvsFile::from_json(
-                &bytes, "pvs",
-            )?)
+            Some(optimizer::api::pvs::PvsFile::from_json(&bytes, "pvs")?)
         } else {
             None
         };
@@ -471,7 +469,7 @@ impl AppState {
                 ));
             }
             (_, Some(bytes)) => {
-                optimizer::visibility::pvs::PvsFile::from_json(bytes, "pvs")
+                optimizer::api::pvs::PvsFile::from_json(bytes, "pvs")
                     .and_then(|f| f.check(objects, "pvs"))
                     .map_err(unprocessable)?;
             }
@@ -581,7 +579,7 @@ fn one_run_report(
     job_bytes: &[u8],
     job: &Job,
     out: &optimizer::place::PlaceOutput,
-    eval: &optimizer::evaluate::Evaluation,
+    eval: &optimizer::api::evaluation::Evaluation,
     seconds: f64,
     frames: Vec<f64>,
 ) -> optimizer::report::Report {

@@ -7,6 +7,7 @@ use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 
 use crate::error::{Error, Result};
+use crate::math::grid::Grid;
 
 /// A placement job.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
@@ -877,6 +878,12 @@ impl Job {
     /// View space maximum as a vector.
     pub fn vs_max(&self) -> DVec3 {
         DVec3::from_array(self.view_space.max)
+    }
+
+    /// The grid of minimum cells over the view space: `ceil(extent /
+    /// cell_size)` cells per axis (at least 1).
+    pub fn grid(&self) -> Grid {
+        Grid::new(self.vs_min(), self.vs_max(), self.problem_views.cell_size)
     }
 
     /// Angle one pixel subtends at the screen centre, radians:

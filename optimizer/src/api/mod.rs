@@ -2,6 +2,10 @@
 //! summary, placement, stats, evaluation, PVS) and their JSON Schemas.
 //! Imports no pipeline stage.
 
+pub mod evaluation;
 pub mod job;
 pub mod placement;
+pub mod pvs;
+pub mod scene;
 pub mod schema;
+pub mod stats;

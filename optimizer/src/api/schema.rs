@@ -3,11 +3,12 @@
 
 use schemars::schema_for;
 
+use crate::api::evaluation::Evaluation;
 use crate::api::job::Job;
-use crate::api::placement::{Placement, Stats};
-use crate::evaluate::Evaluation;
-use crate::scene::SceneSummary;
-use crate::visibility::pvs::PvsFile;
+use crate::api::placement::Placement;
+use crate::api::pvs::PvsFile;
+use crate::api::scene::SceneSummary;
+use crate::api::stats::Stats;
 
 /// `(file name, schema text)` of every wire type.
 pub fn all() -> Vec<(&'static str, String)> {

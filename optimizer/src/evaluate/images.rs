@@ -18,9 +18,8 @@ use std::collections::HashMap;
 
 use glam::DVec3;
 use rayon::prelude::*;
-use schemars::JsonSchema;
-use serde::{Deserialize, Serialize};
 
+use crate::api::evaluation::{ImageReport, MismatchSpread, PsnrSpread, WorstView};
 use crate::api::job::Job;
 use crate::api::placement::Placement;
 use crate::bake::{Layer, cluster_triangles, geom_objects, surface};
@@ -49,68 +48,6 @@ impl Default for ImageOptions {
             tolerance: 24,
         }
     }
-}
-
-/// Mean and minimum of a per-view PSNR.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
-#[serde(deny_unknown_fields)]
-pub struct PsnrSpread {
-    /// Mean over the views, dB.
-    pub mean: f64,
-    /// The worst (smallest) view, dB.
-    pub min: f64,
-}
-
-/// Mean and maximum of a per-view mismatch fraction.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
-#[serde(deny_unknown_fields)]
-pub struct MismatchSpread {
-    /// Mean over the views.
-    pub mean: f64,
-    /// The worst (largest) view.
-    pub max: f64,
-}
-
-/// The worst view of an image comparison.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
-#[serde(deny_unknown_fields)]
-pub struct WorstView {
-    /// Index of the view among the sampled ones.
-    pub view: u32,
-    /// The CPV it lies in.
-    pub cpv: u32,
-    /// Eye position.
-    pub eye: [f64; 3],
-    /// Unit view direction.
-    pub direction: [f64; 3],
-    /// Its mismatch fraction.
-    pub mismatch_fraction: f64,
-    /// Its PSNR, dB.
-    pub psnr_db: f64,
-}
-
-/// The image comparison report (`image` in `eval.json`).
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
-#[serde(deny_unknown_fields)]
-pub struct ImageReport {
-    /// Views rendered (each twice); 0 when no CPV has impostors.
-    pub views: u32,
-    /// Seed of the view sampler.
-    pub seed: u64,
-    /// Per-channel colour tolerance (0–255) of the mismatch test.
-    pub tolerance: u8,
-    /// Image size, pixels.
-    pub resolution: [u32; 2],
-    /// PSNR over RGB, dB (capped at 100 for identical images).
-    pub psnr_db: PsnrSpread,
-    /// Share of pixels without a match within one pixel.
-    pub mismatch_fraction: MismatchSpread,
-    /// Mean share of pixels drawn by impostor quads (pixels that change when
-    /// the quads are added to the geometry they do not replace): shows that
-    /// the comparison actually looks at impostors.
-    pub impostor_pixel_fraction: f64,
-    /// The view with the largest mismatch fraction.
-    pub worst_view: Option<WorstView>,
 }
 
 /// The two renders of the worst view, RGBA8.

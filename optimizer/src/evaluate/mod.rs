@@ -22,14 +22,14 @@ use std::collections::HashMap;
 
 use glam::DVec3;
 use rayon::prelude::*;
-use schemars::JsonSchema;
-use serde::{Deserialize, Serialize};
 
-use crate::api::job::{Job, VisibilityMode};
+use crate::api::evaluation::{Evaluation, MissedObject, ParallaxCheck, VisibilityCheck};
+use crate::api::job::Job;
 use crate::api::placement::{Placement, ViewCellJson};
 use crate::error::{Error, Result};
 use crate::input::SceneInput;
 use crate::math::geom::{Aabb, Sphere, Vdi, ViewFrustum, face_direction};
+use crate::math::grid::Grid;
 use crate::math::rng::Rng;
 use crate::model::cost::{Cost, CostModel};
 use crate::model::impostor::ViewCell;
@@ -37,7 +37,7 @@ use crate::render::raycast::RayCaster;
 use crate::scene::Scene;
 use crate::scene::geometry::SceneGeometry;
 use crate::scene::hierarchy::Hierarchy;
-use crate::views::{Grid, leaf_level};
+use crate::views::leaf_level;
 use crate::visibility::{ObjectSet, Visibility};
 
 /// Options of an evaluation.
@@ -82,121 +82,6 @@ impl Default for EvalOptions {
             check_objects: 16,
         }
     }
-}
-
-/// The check of the visible sets (`evaluation.visibility`).
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
-#[serde(deny_unknown_fields)]
-pub struct VisibilityCheck {
-    /// The job's visibility mode.
-    pub mode: VisibilityMode,
-    /// Grid cells the sampled views lie in.
-    pub cells: u64,
-    /// Mean size of the visible set of a view's cell.
-    pub mean_visible_objects: f64,
-    /// Mean share of the scene's objects in a view's visible set.
-    pub mean_visible_fraction: f64,
-    /// Views whose visible set was checked by ray casting (0 without
-    /// geometry).
-    pub views_checked: u64,
-    /// Rays cast for the check.
-    pub rays: u64,
-    /// (view, object) pairs where a ray from the view point reached an
-    /// object that is not in the view's visible set. Must be 0 in
-    /// conservative mode.
-    pub missed_objects: u64,
-    /// Views with at least one missed object.
-    pub views_with_misses: u64,
-    /// Missed objects found by the image-grid rays.
-    pub missed_by_image_rays: u64,
-    /// Missed objects found by rays aimed at culled objects.
-    pub missed_by_probe_rays: u64,
-    /// The first few misses (by view index).
-    pub examples: Vec<MissedObject>,
-}
-
-/// An object seen from a view point but missing from the view's visible set.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
-#[serde(deny_unknown_fields)]
-pub struct MissedObject {
-    /// Index of the sampled view.
-    pub view: u64,
-    /// The view point.
-    pub eye: [f64; 3],
-    /// The object id.
-    pub object: u32,
-}
-
-/// The evaluation report (`eval.json`).
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
-#[serde(deny_unknown_fields)]
-pub struct Evaluation {
-    /// Views sampled.
-    pub views: u64,
-    /// Seed of the sampler.
-    pub seed: u64,
-    /// The target frame time, ms.
-    pub target_frame_time_ms: f64,
-    /// Largest view time, ms.
-    pub max_ms: f64,
-    /// Median view time, ms.
-    pub p50_ms: f64,
-    /// 99th percentile view time, ms.
-    pub p99_ms: f64,
-    /// Mean view time, ms.
-    pub mean_ms: f64,
-    /// Views over the target.
-    pub violations: u64,
-    /// Views over the target whose CPV is solved or that lie in no CPV: must
-    /// be 0 for every placement.
-    pub violations_in_solved: u64,
-    /// Largest view time among views whose CPV is solved or in no CPV, ms.
-    pub max_ms_in_solved: f64,
-    /// Views that lie in some CPV.
-    pub views_in_cpvs: u64,
-    /// Views that lie in an unsolved CPV.
-    pub views_in_unsolved_cpvs: u64,
-    /// Views where an impostor of their CPV was used outside its view cell
-    /// (must be 0).
-    pub impostors_outside_view_cell: u64,
-    /// Mean of `target − time` over views within the target, ms
-    /// (over-conservativeness).
-    pub mean_slack_ms: f64,
-    /// Image error of the impostors (`evaluate --images N`).
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub image: Option<crate::evaluate::images::ImageReport>,
-    /// The visibility used and its check (absent without visibility).
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub visibility: Option<VisibilityCheck>,
-    /// Geometric parallax of the impostors (absent without impostors).
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub parallax: Option<ParallaxCheck>,
-}
-
-/// The image quality criterion checked geometrically for every impostor
-/// (`evaluation.parallax`): how far a point of the cluster and its image
-/// on its layer lie apart, seen from viewpoints of the view cell.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
-#[serde(deny_unknown_fields)]
-pub struct ParallaxCheck {
-    /// The job's error budget, pixels.
-    pub max_error_px: f64,
-    /// Impostors checked.
-    pub impostors: u64,
-    /// Sphere points per impostor, each seen from every sampled viewpoint.
-    pub points: u32,
-    /// Viewpoints per impostor.
-    pub viewpoints: u32,
-    /// Largest error over all impostors, pixels.
-    pub max_px: f64,
-    /// Mean over impostors of their largest error, pixels.
-    pub mean_px: f64,
-    /// Impostors whose largest error exceeds the budget.
-    pub over_budget: u64,
-    /// Impostors whose largest error exceeds 1.5 times the budget.
-    pub over_budget_1_5: u64,
-    /// The impostor with the largest error.
-    pub worst_impostor: u32,
 }
 
 /// Sphere points and viewpoints per impostor of the parallax check.
@@ -325,7 +210,7 @@ fn prepare(scene: &Scene, job: &Job, placement: &Placement, source: &str) -> Res
             cell,
         });
     }
-    let grid = Grid::new(job);
+    let grid = job.grid();
     let level = leaf_level(job.problem_views.min_vdi_deg);
     let mut lookup = HashMap::with_capacity(placement.cpvs.len());
     let mut cpv_replaced = Vec::with_capacity(placement.cpvs.len());

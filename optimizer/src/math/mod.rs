@@ -2,4 +2,5 @@
 //! intervals on cube faces, and the seeded random number generator.
 
 pub mod geom;
+pub mod grid;
 pub mod rng;

@@ -120,7 +120,7 @@ impl CostModel {
 
     /// Screen coverage of a sphere of `radius` seen from `distance`: its
     /// projected area over the screen area, in `[0, 1]` (1 from inside the
-    /// sphere). This is the quantity [`crate::scene::LodLevel::min_coverage`]
+    /// sphere). This is the quantity [`crate::api::scene::LodLevel::min_coverage`]
     /// is compared with.
     pub fn coverage(&self, radius: f64, distance: f64) -> f64 {
         (self.pixels(radius, distance) / self.screen_px).clamp(0.0, 1.0)
@@ -248,7 +248,7 @@ mod tests {
     /// An object of 1000 triangles and 3 calls with two coarser levels; the
     /// last has more draw calls than the others.
     fn lod_object() -> Object {
-        use crate::scene::LodLevel;
+        use crate::api::scene::LodLevel;
         let level = |min_coverage, triangles, draw_calls| LodLevel {
             min_coverage,
             triangles,
@@ -333,8 +333,8 @@ mod tests {
 
     #[test]
     fn region_cost_bounds_every_farther_view() {
+        use crate::api::scene::LodLevel;
         use crate::math::rng::Rng;
-        use crate::scene::LodLevel;
         let mut rng = Rng::new(11);
         for combine in [Combine::Sum, Combine::Max, Combine::Primitives] {
             let m = CostModel::new(&job(combine));

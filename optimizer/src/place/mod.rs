@@ -8,9 +8,10 @@ use indicatif::{ProgressBar, ProgressStyle};
 
 use crate::api::job::{Job, Method};
 use crate::api::placement::{
-    DirectionsJson, PlacedCpv, PlacedImpostor, Placement, RegionJson, SphereJson, StageTime, Stats,
-    Summary, ViewCellJson, peak_rss_bytes,
+    DirectionsJson, PlacedCpv, PlacedImpostor, Placement, RegionJson, SphereJson, Summary,
+    ViewCellJson,
 };
+use crate::api::stats::{StageTime, Stats};
 use crate::candidates::{self, Candidates};
 pub use crate::evaluate::Shared;
 use crate::greedy::{self, Selection};
@@ -767,4 +768,18 @@ mod tests {
         .unwrap();
         assert_eq!(eval.violations_in_solved, 0);
     }
+}
+
+/// Peak resident set size of this process (VmHWM), bytes; 0 when unknown.
+pub fn peak_rss_bytes() -> u64 {
+    std::fs::read_to_string("/proc/self/status")
+        .ok()
+        .and_then(|s| {
+            s.lines().find(|l| l.starts_with("VmHWM:")).and_then(|l| {
+                l.split_whitespace()
+                    .nth(1)
+                    .and_then(|v| v.parse::<u64>().ok())
+            })
+        })
+        .map_or(0, |kb| kb * 1024)
 }

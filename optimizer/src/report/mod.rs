@@ -12,7 +12,7 @@ pub mod run;
 use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 
-use crate::api::placement::StageTime;
+use crate::api::stats::StageTime;
 
 /// A whole report (`report.json`).
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize, JsonSchema)]
@@ -140,8 +140,8 @@ pub struct EvalSummary {
     pub parallax_max_px: Option<f64>,
 }
 
-impl From<&crate::evaluate::Evaluation> for EvalSummary {
-    fn from(e: &crate::evaluate::Evaluation) -> Self {
+impl From<&crate::api::evaluation::Evaluation> for EvalSummary {
+    fn from(e: &crate::api::evaluation::Evaluation) -> Self {
         EvalSummary {
             views: e.views,
             max_ms: e.max_ms,

@@ -66,8 +66,9 @@ use gltf::accessor::{DataType, Dimensions};
 use gltf::mesh::Mode;
 use rayon::prelude::*;
 
+use crate::api::scene::LodLevel;
 use crate::error::{Error, Result};
-use crate::scene::{LodLevel, Object, Scene, SceneSummary};
+use crate::scene::{Object, Scene};
 
 /// Largest number of glTF nodes (and so of objects) a scene may have.
 pub const MAX_NODES: usize = 10_000_000;
@@ -132,7 +133,7 @@ pub fn load_scene_file(path: &Path) -> Result<Scene> {
         .extension()
         .is_some_and(|e| e.eq_ignore_ascii_case("json"));
     if !bytes.starts_with(b"glTF") && is_json_ext {
-        return SceneSummary::from_json(&bytes, &source);
+        return Scene::from_summary_json(&bytes, &source);
     }
     dispatch(&bytes, &source, Some(base_dir_of(path)))
 }
@@ -165,7 +166,7 @@ fn dispatch(bytes: &[u8], source: &str, base_dir: Option<&Path>) -> Result<Scene
         objects: Option<serde::de::IgnoredAny>,
     }
     match serde_json::from_slice::<Probe>(bytes) {
-        Ok(Probe { objects: Some(_) }) => SceneSummary::from_json(bytes, source),
+        Ok(Probe { objects: Some(_) }) => Scene::from_summary_json(bytes, source),
         Ok(Probe { objects: None }) => load_gltf(bytes, source, base_dir),
         Err(e) => Err(Error::bad(
             source,
@@ -2173,7 +2174,7 @@ mod tests {
         // The summary round trip keeps the levels.
         let scene = load(&d.glb()).unwrap();
         let json = serde_json::to_vec(&scene.summary()).unwrap();
-        let back = SceneSummary::from_json(&json, "s.json").unwrap();
+        let back = Scene::from_summary_json(&json, "s.json").unwrap();
         assert_eq!(back.objects, scene.objects);
 
         // `ids.len()` values: the last level is never culled.

@@ -36,40 +36,18 @@ use std::collections::{BTreeMap, BTreeSet, HashMap};
 
 use glam::{DMat3, Vec3};
 use rayon::prelude::*;
-use schemars::JsonSchema;
-use serde::{Deserialize, Serialize};
 
 use crate::api::job::LodParams;
+use crate::api::scene::LodLevel;
+use crate::api::stats::LodReport;
 use crate::error::{Error, Result};
 use crate::math::geom::projected_area_px;
+use crate::scene::Scene;
 use crate::scene::geometry::{MeshData, SceneGeometry};
-use crate::scene::{LodLevel, Scene};
 
 /// Most generated levels below the full-detail one (objects have at most 32
 /// levels).
 pub const MAX_LEVELS: u32 = 31;
-
-/// What [`generate`] did; part of the placement statistics.
-#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize, JsonSchema)]
-#[serde(deny_unknown_fields)]
-pub struct LodReport {
-    /// Objects given generated levels.
-    pub objects: u64,
-    /// Objects that already had levels (from the file); left unchanged.
-    pub objects_with_file_levels: u64,
-    /// Objects with fewer than `min_triangles` triangles; given none.
-    pub objects_too_small: u64,
-    /// `levels_per_object[k]`: objects with enough triangles and no levels
-    /// of their own that were given `k` levels below the full-detail one
-    /// (`k = 0` when simplification gave no usable level).
-    pub levels_per_object: Vec<u64>,
-    /// `triangles[k]`: triangles of the objects given levels, summed, at
-    /// level `k` (`k = 0`: full detail, before simplification); an object
-    /// with fewer levels counts its coarsest.
-    pub triangles: Vec<u64>,
-    /// Distinct mesh primitives simplified.
-    pub meshes_simplified: u64,
-}
 
 /// Removes every object's levels of detail (file or generated). Bounds are
 /// kept: they still contain the full-detail level.

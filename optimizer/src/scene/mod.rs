@@ -10,9 +10,8 @@ pub mod gltf_load;
 pub mod hierarchy;
 pub mod lod;
 
+use crate::api::scene::{LodLevel, SceneSummary, SummaryObject};
 use glam::DVec3;
-use schemars::JsonSchema;
-use serde::{Deserialize, Serialize};
 
 use crate::error::{Error, Result};
 
@@ -42,19 +41,6 @@ pub struct Object {
 
 /// Most levels of detail an object may have.
 pub const MAX_LODS: usize = 32;
-
-/// One level of detail of an object.
-#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
-#[serde(deny_unknown_fields)]
-pub struct LodLevel {
-    /// Smallest screen coverage (projected bounding-sphere area over screen
-    /// area, in `[0, 1]`) at which this level is drawn.
-    pub min_coverage: f64,
-    /// Triangles of this level.
-    pub triangles: u64,
-    /// Draw calls of this level.
-    pub draw_calls: u32,
-}
 
 impl Object {
     /// Centre of the bounding box (also the centre of the bounding sphere).
@@ -184,39 +170,9 @@ fn validate_lods(o: &Object) -> std::result::Result<(), String> {
     Ok(())
 }
 
-/// JSON scene summary (`schemas/scene.schema.json`): objects with bounds and
-/// costs, no geometry. Object ids are array indices.
-#[derive(Clone, Debug, Serialize, Deserialize, JsonSchema)]
-#[serde(deny_unknown_fields)]
-pub struct SceneSummary {
-    /// The objects; the array index is the object id.
-    pub objects: Vec<SummaryObject>,
-}
-
-/// One object of a JSON scene summary.
-#[derive(Clone, Debug, Serialize, Deserialize, JsonSchema)]
-#[serde(deny_unknown_fields)]
-pub struct SummaryObject {
-    /// Optional name.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub name: Option<String>,
-    /// World bounding box minimum `[x, y, z]`, metres.
-    pub min: [f64; 3],
-    /// World bounding box maximum `[x, y, z]`, metres.
-    pub max: [f64; 3],
-    /// Triangle count.
-    pub triangles: u64,
-    /// Draw calls.
-    pub draw_calls: u32,
-    /// Levels of detail, finest first (level 0 is the object itself); empty
-    /// when the object has none.
-    #[serde(default, skip_serializing_if = "Vec::is_empty")]
-    pub lods: Vec<LodLevel>,
-}
-
-impl SceneSummary {
+impl Scene {
     /// Parses a JSON scene summary; `source` names the input in errors.
-    pub fn from_json(bytes: &[u8], source: &str) -> Result<Scene> {
+    pub fn from_summary_json(bytes: &[u8], source: &str) -> Result<Scene> {
         let summary: SceneSummary = serde_json::from_slice(bytes)
             .map_err(|e| Error::bad(source, format!("invalid scene summary JSON: {e}")))?;
         let scene = Scene {
@@ -276,13 +232,13 @@ mod tests {
         let json = crate::to_json_bytes(&scene.summary()).unwrap();
         let text = String::from_utf8(json.clone()).unwrap();
         assert_eq!(text.matches("\"lods\"").count(), 1, "omitted when empty");
-        let back = SceneSummary::from_json(&json, "s.json").unwrap();
+        let back = Scene::from_summary_json(&json, "s.json").unwrap();
         assert_eq!(back.objects, scene.objects);
         // Invalid levels are rejected with the object named.
         let mut bad = scene.clone();
         bad.objects[0].lods[2].min_coverage = 0.5;
         let json = crate::to_json_bytes(&bad.summary()).unwrap();
-        let e = SceneSummary::from_json(&json, "s.json")
+        let e = Scene::from_summary_json(&json, "s.json")
             .unwrap_err()
             .to_string();
         assert!(

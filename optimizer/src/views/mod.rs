@@ -11,106 +11,15 @@
 //! parallel; results are collected in kd order, so the output does not depend
 //! on the thread count.
 
-use glam::DVec3;
-
 use crate::model::cost::{Cost, CostModel};
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering as AtomicOrdering};
 
 use crate::api::job::Job;
 use crate::math::geom::{Aabb, Cone, Vdi, enclosing_cone, frustum_half_diagonal};
+use crate::math::grid::Grid;
 use crate::scene::Scene;
 use crate::scene::hierarchy::Hierarchy;
 use crate::visibility::{ObjectSet, Visibility};
-
-/// The grid of minimum-size 3D cells over the view space.
-#[derive(Clone, Debug)]
-pub struct Grid {
-    /// View space minimum.
-    pub min: DVec3,
-    /// View space maximum.
-    pub max: DVec3,
-    /// Cells per axis.
-    pub counts: [u32; 3],
-}
-
-impl Grid {
-    /// The grid of a job: `ceil(extent / cell_size)` cells per axis (at least 1).
-    pub fn new(job: &Job) -> Grid {
-        let (min, max) = (job.vs_min(), job.vs_max());
-        let s = job.problem_views.cell_size;
-        let counts = [0, 1, 2].map(|a| ((max[a] - min[a]) / s).ceil().max(1.0) as u32);
-        Grid { min, max, counts }
-    }
-
-    /// Coordinate of boundary `i` on `axis`.
-    pub fn boundary(&self, axis: usize, i: u32) -> f64 {
-        let n = self.counts[axis];
-        if i >= n {
-            return self.max[axis];
-        }
-        self.min[axis] + (self.max[axis] - self.min[axis]) * (f64::from(i) / f64::from(n))
-    }
-
-    /// The box of cells `lo..hi` (exclusive) per axis.
-    pub fn cell_box(&self, lo: [u32; 3], hi: [u32; 3]) -> Aabb {
-        Aabb::new(
-            DVec3::new(
-                self.boundary(0, lo[0]),
-                self.boundary(1, lo[1]),
-                self.boundary(2, lo[2]),
-            ),
-            DVec3::new(
-                self.boundary(0, hi[0]),
-                self.boundary(1, hi[1]),
-                self.boundary(2, hi[2]),
-            ),
-        )
-    }
-
-    /// The cell containing `p` (half-open cells; the view-space maximum belongs
-    /// to the last cell), or `None` outside the view space.
-    pub fn cell_of(&self, p: DVec3) -> Option<[u32; 3]> {
-        let mut c = [0u32; 3];
-        for (a, slot) in c.iter_mut().enumerate() {
-            if !(p[a] >= self.min[a] && p[a] <= self.max[a]) {
-                return None;
-            }
-            let n = self.counts[a];
-            let ext = self.max[a] - self.min[a];
-            let mut i = if ext > 0.0 {
-                (((p[a] - self.min[a]) / ext) * f64::from(n))
-                    .floor()
-                    .max(0.0) as u32
-            } else {
-                0
-            };
-            i = i.min(n - 1);
-            // Agree exactly with the stored boundaries.
-            if i > 0 && p[a] < self.boundary(a, i) {
-                i -= 1;
-            } else if i + 1 < n && p[a] >= self.boundary(a, i + 1) {
-                i += 1;
-            }
-            *slot = i;
-        }
-        Some(c)
-    }
-
-    /// Linear index of a cell.
-    pub fn linear(&self, c: [u32; 3]) -> u32 {
-        (c[2] * self.counts[1] + c[1]) * self.counts[0] + c[0]
-    }
-
-    /// Total number of cells.
-    pub fn len(&self) -> u64 {
-        self.counts.iter().map(|&c| u64::from(c)).product()
-    }
-
-    /// True when the grid has no cells (never for a valid job).
-    pub fn is_empty(&self) -> bool {
-        self.len() == 0
-    }
-}
 
 /// A node of the 3D view space hierarchy (pre-order ids, root 0).
 #[derive(Clone, Debug)]
@@ -253,8 +162,8 @@ impl<'a> Context<'a> {
     /// Level-of-detail counters (`None` when no object has levels).
     pub fn lod_stats(
         &self,
-        generated: Option<crate::scene::lod::LodReport>,
-    ) -> Option<crate::api::placement::LodStats> {
+        generated: Option<crate::api::stats::LodReport>,
+    ) -> Option<crate::api::stats::LodStats> {
         let with = self
             .scene
             .objects
@@ -276,7 +185,7 @@ impl<'a> Context<'a> {
             .map(|a| a.load(AtomicOrdering::Relaxed))
             .collect();
         chosen.push(self.lod_levels[crate::scene::MAX_LODS].load(AtomicOrdering::Relaxed));
-        Some(crate::api::placement::LodStats {
+        Some(crate::api::stats::LodStats {
             objects_with_lods: with as u64,
             chosen_levels: chosen,
             generated,
@@ -586,7 +495,7 @@ fn process(
 
 /// Approximates the problem view space of `job` over `scene`.
 pub fn approximate(ctx: &Context, job: &Job) -> ProblemViews {
-    let grid = Grid::new(job);
+    let grid = job.grid();
     let mut kd = build_kd(&grid);
     let level = leaf_level(job.problem_views.min_vdi_deg);
     let n = 1u32 << level;
@@ -700,7 +609,7 @@ mod tests {
     fn grid_cells_are_at_most_cell_size_and_partition() {
         let mut job = Job::with_view_space([0.0, 1.5, 0.0], [1500.0, 2.0, 1000.0]);
         job.problem_views.cell_size = 23.0;
-        let g = Grid::new(&job);
+        let g = job.grid();
         assert_eq!(g.counts, [66, 1, 44]);
         let b = g.cell_box([65, 0, 43], [66, 1, 44]);
         assert_eq!(b.max, DVec3::new(1500.0, 2.0, 1000.0));

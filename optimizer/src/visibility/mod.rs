@@ -27,15 +27,15 @@ use std::sync::{Arc, OnceLock};
 use std::time::Instant;
 
 use rayon::prelude::*;
-use schemars::JsonSchema;
-use serde::{Deserialize, Serialize};
 
 use crate::api::job::{Job, VisibilityMode};
+use crate::api::pvs::PvsFile;
+use crate::api::stats::{OccluderStats, VisibilityStats};
 use crate::math::geom::Aabb;
+use crate::math::grid::Grid;
 use crate::render::raycast::RayCaster;
 use crate::scene::Scene;
 use crate::scene::hierarchy::Hierarchy;
-use crate::views::Grid;
 use crate::{Error, Result};
 
 /// A set of object ids (a bit set).
@@ -143,13 +143,13 @@ pub struct VisibilityInputs<'a> {
     /// The geometry the caster was built from (sampled mode's aimed rays).
     pub geometry: Option<&'a crate::scene::geometry::SceneGeometry>,
     /// A PVS file (precomputed mode).
-    pub pvs: Option<&'a pvs::PvsFile>,
+    pub pvs: Option<&'a PvsFile>,
 }
 
 enum Source<'a> {
     Conservative(conservative::Conservative),
     Sampled(sampled::Sampled<'a>),
-    Precomputed(&'a pvs::PvsFile),
+    Precomputed(&'a PvsFile),
 }
 
 /// The visibility of one job: cached per grid cell, computed on demand,
@@ -164,61 +164,7 @@ pub struct Visibility<'a> {
     source: Source<'a>,
     cells: Vec<OnceLock<CellVisibility>>,
     nanos: AtomicU64,
-    occluder_stats: Option<occluders::OccluderStats>,
-}
-
-/// Visibility counters (`stats.visibility`).
-#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize, JsonSchema)]
-pub struct VisibilityStats {
-    /// The mode.
-    pub mode: VisibilityMode,
-    /// Grid cells whose set was computed.
-    pub cells_computed: u64,
-    /// Mean size of a computed cell's set.
-    pub mean_visible_objects: f64,
-    /// Mean share of the scene's objects in a computed cell's set.
-    pub mean_visible_fraction: f64,
-    /// Largest share of the scene's objects in a computed cell's set.
-    pub max_visible_fraction: f64,
-    /// CPU time spent computing cell sets, seconds (summed over threads).
-    pub cpu_seconds: f64,
-    /// Conservative mode: occluder extraction counters.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub occluders: Option<occluders::OccluderStats>,
-    /// Conservative mode: occluders left after shrinking.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub shrunk_occluders: Option<u64>,
-    /// Conservative mode: sample points per cell per axis.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub samples_per_axis: Option<[u32; 3]>,
-    /// Conservative mode: how far occluders shrink per axis, metres.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub shrink_m: Option<[f64; 3]>,
-    /// Sampled mode: rays per cell.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub rays_per_cell: Option<u32>,
-    /// Sampled mode: mean over cells of the Good–Turing missing mass (the
-    /// chance that one more ray finds an object no ray found).
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub missing_mass_mean: Option<f64>,
-    /// Sampled mode: largest missing mass over cells.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub missing_mass_max: Option<f64>,
-    /// Sampled mode: mean over cells of the objects found only by the
-    /// aimed probes.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub found_by_probes_mean: Option<f64>,
-    /// Sampled mode: mean over cells of the estimated visible objects no
-    /// ray found (Chao1 over the uniform rays, less the probes' finds).
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub unseen_objects_mean: Option<f64>,
-    /// Sampled mode: estimated share of a cell's visible objects that the
-    /// rays missed, `unseen / (found + unseen)`, averaged over cells.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub missed_object_rate: Option<f64>,
-    /// Precomputed mode: cells the file does not cover.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub uncovered_cells: Option<u64>,
+    occluder_stats: Option<OccluderStats>,
 }
 
 impl<'a> Visibility<'a> {
@@ -232,7 +178,7 @@ impl<'a> Visibility<'a> {
         inputs: VisibilityInputs<'a>,
     ) -> Result<Option<Visibility<'a>>> {
         let params = &job.visibility;
-        let grid = Grid::new(job);
+        let grid = job.grid();
         let cell = grid.cell_box([0; 3], [1; 3]);
         let cell_ext = cell.max - cell.min;
         let missing = |what: &str| {
@@ -319,7 +265,7 @@ impl<'a> Visibility<'a> {
                 covered: true,
             },
             Source::Sampled(s) => s.cell_pvs(b, index, self.scene),
-            Source::Precomputed(f) => match f.region_set(b) {
+            Source::Precomputed(f) => match pvs::region_set(f, b) {
                 Some(set) => CellVisibility {
                     set: Arc::new(set),
                     missing_mass: 0.0,

@@ -35,9 +35,8 @@ use std::collections::HashMap;
 
 use glam::{DVec3, Vec3};
 use rayon::prelude::*;
-use schemars::JsonSchema;
-use serde::{Deserialize, Serialize};
 
+use crate::api::stats::OccluderStats;
 use crate::math::geom::Aabb;
 use crate::scene::Scene;
 use crate::scene::geometry::{AlphaMode, SceneGeometry};
@@ -67,21 +66,6 @@ pub struct Occluders {
     pub boxes: Vec<OccluderBox>,
     /// Counters.
     pub stats: OccluderStats,
-}
-
-/// Occluder extraction counters (reported in the placement stats).
-#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize, JsonSchema)]
-pub struct OccluderStats {
-    /// Objects with at least one occluder box.
-    pub occluder_objects: u64,
-    /// Closed (or open-bottom) opaque components found.
-    pub solid_components: u64,
-    /// Components rejected (open, non-manifold, not opaque, inconsistent winding).
-    pub rejected_components: u64,
-    /// Boxes inside single solids.
-    pub boxes: u64,
-    /// Bridges between touching boxes.
-    pub bridges: u64,
 }
 
 /// A component of one object's surface in world space.

@@ -1,0 +1,184 @@
+//! The evaluation report (`impostor evaluate`, `schemas/evaluation.schema.json`):
+//! what the independent check measured.
+
+use schemars::JsonSchema;
+use serde::{Deserialize, Serialize};
+
+use crate::api::job::VisibilityMode;
+
+/// The check of the visible sets (`evaluation.visibility`).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct VisibilityCheck {
+    /// The job's visibility mode.
+    pub mode: VisibilityMode,
+    /// Grid cells the sampled views lie in.
+    pub cells: u64,
+    /// Mean size of the visible set of a view's cell.
+    pub mean_visible_objects: f64,
+    /// Mean share of the scene's objects in a view's visible set.
+    pub mean_visible_fraction: f64,
+    /// Views whose visible set was checked by ray casting (0 without
+    /// geometry).
+    pub views_checked: u64,
+    /// Rays cast for the check.
+    pub rays: u64,
+    /// (view, object) pairs where a ray from the view point reached an
+    /// object that is not in the view's visible set. Must be 0 in
+    /// conservative mode.
+    pub missed_objects: u64,
+    /// Views with at least one missed object.
+    pub views_with_misses: u64,
+    /// Missed objects found by the image-grid rays.
+    pub missed_by_image_rays: u64,
+    /// Missed objects found by rays aimed at culled objects.
+    pub missed_by_probe_rays: u64,
+    /// The first few misses (by view index).
+    pub examples: Vec<MissedObject>,
+}
+
+/// An object seen from a view point but missing from the view's visible set.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct MissedObject {
+    /// Index of the sampled view.
+    pub view: u64,
+    /// The view point.
+    pub eye: [f64; 3],
+    /// The object id.
+    pub object: u32,
+}
+
+/// The evaluation report (`eval.json`).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct Evaluation {
+    /// Views sampled.
+    pub views: u64,
+    /// Seed of the sampler.
+    pub seed: u64,
+    /// The target frame time, ms.
+    pub target_frame_time_ms: f64,
+    /// Largest view time, ms.
+    pub max_ms: f64,
+    /// Median view time, ms.
+    pub p50_ms: f64,
+    /// 99th percentile view time, ms.
+    pub p99_ms: f64,
+    /// Mean view time, ms.
+    pub mean_ms: f64,
+    /// Views over the target.
+    pub violations: u64,
+    /// Views over the target whose CPV is solved or that lie in no CPV: must
+    /// be 0 for every placement.
+    pub violations_in_solved: u64,
+    /// Largest view time among views whose CPV is solved or in no CPV, ms.
+    pub max_ms_in_solved: f64,
+    /// Views that lie in some CPV.
+    pub views_in_cpvs: u64,
+    /// Views that lie in an unsolved CPV.
+    pub views_in_unsolved_cpvs: u64,
+    /// Views where an impostor of their CPV was used outside its view cell
+    /// (must be 0).
+    pub impostors_outside_view_cell: u64,
+    /// Mean of `target − time` over views within the target, ms
+    /// (over-conservativeness).
+    pub mean_slack_ms: f64,
+    /// Image error of the impostors (`evaluate --images N`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub image: Option<ImageReport>,
+    /// The visibility used and its check (absent without visibility).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub visibility: Option<VisibilityCheck>,
+    /// Geometric parallax of the impostors (absent without impostors).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub parallax: Option<ParallaxCheck>,
+}
+
+/// The image quality criterion checked geometrically for every impostor
+/// (`evaluation.parallax`): how far a point of the cluster and its image
+/// on its layer lie apart, seen from viewpoints of the view cell.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct ParallaxCheck {
+    /// The job's error budget, pixels.
+    pub max_error_px: f64,
+    /// Impostors checked.
+    pub impostors: u64,
+    /// Sphere points per impostor, each seen from every sampled viewpoint.
+    pub points: u32,
+    /// Viewpoints per impostor.
+    pub viewpoints: u32,
+    /// Largest error over all impostors, pixels.
+    pub max_px: f64,
+    /// Mean over impostors of their largest error, pixels.
+    pub mean_px: f64,
+    /// Impostors whose largest error exceeds the budget.
+    pub over_budget: u64,
+    /// Impostors whose largest error exceeds 1.5 times the budget.
+    pub over_budget_1_5: u64,
+    /// The impostor with the largest error.
+    pub worst_impostor: u32,
+}
+
+/// Mean and minimum of a per-view PSNR.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct PsnrSpread {
+    /// Mean over the views, dB.
+    pub mean: f64,
+    /// The worst (smallest) view, dB.
+    pub min: f64,
+}
+
+/// Mean and maximum of a per-view mismatch fraction.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct MismatchSpread {
+    /// Mean over the views.
+    pub mean: f64,
+    /// The worst (largest) view.
+    pub max: f64,
+}
+
+/// The worst view of an image comparison.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct WorstView {
+    /// Index of the view among the sampled ones.
+    pub view: u32,
+    /// The CPV it lies in.
+    pub cpv: u32,
+    /// Eye position.
+    pub eye: [f64; 3],
+    /// Unit view direction.
+    pub direction: [f64; 3],
+    /// Its mismatch fraction.
+    pub mismatch_fraction: f64,
+    /// Its PSNR, dB.
+    pub psnr_db: f64,
+}
+
+/// The image comparison report (`image` in `eval.json`).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct ImageReport {
+    /// Views rendered (each twice); 0 when no CPV has impostors.
+    pub views: u32,
+    /// Seed of the view sampler.
+    pub seed: u64,
+    /// Per-channel colour tolerance (0–255) of the mismatch test.
+    pub tolerance: u8,
+    /// Image size, pixels.
+    pub resolution: [u32; 2],
+    /// PSNR over RGB, dB (capped at 100 for identical images).
+    pub psnr_db: PsnrSpread,
+    /// Share of pixels without a match within one pixel.
+    pub mismatch_fraction: MismatchSpread,
+    /// Mean share of pixels drawn by impostor quads (pixels that change when
+    /// the quads are added to the geometry they do not replace): shows that
+    /// the comparison actually looks at impostors.
+    pub impostor_pixel_fraction: f64,
+    /// The view with the largest mismatch fraction.
+    pub worst_view: Option<WorstView>,
+}
