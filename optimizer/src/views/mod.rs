@@ -557,6 +557,7 @@ pub fn enclosing_time(ctx: &Context, region: &Aabb, vdi: &Vdi) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use glam::DVec3;
     use crate::math::geom::{ViewFrustum, face_direction};
     use crate::math::rng::Rng;
     use crate::scene::Object;
