@@ -15,6 +15,7 @@ pub mod api;
 pub mod bake;
 pub mod candidates;
 pub mod citygen;
+pub mod control;
 pub mod error;
 pub mod evaluate;
 pub mod greedy;

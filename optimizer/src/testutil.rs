@@ -146,7 +146,7 @@ pub fn sample_report() -> crate::report::Report {
             knob: knob.map(String::from),
             value,
             target_frame_time_ms: t,
-            status: "ok".into(),
+            status: crate::report::RunStatus::Ok,
             error: None,
             cpvs: 120,
             candidates: 900,
@@ -183,7 +183,7 @@ pub fn sample_report() -> crate::report::Report {
                 10.0 / t,
             );
             if method == "env-map" && i == 0 {
-                r.status = "failed".into();
+                r.status = crate::report::RunStatus::Failed;
                 r.error = Some("placement failed: 3 CPVs unsolvable, budget exceeded".into());
                 r.eval = None;
             }
@@ -246,7 +246,7 @@ pub fn sample_report() -> crate::report::Report {
             .zip(mem)
             .map(|(l, m)| Perturbed {
                 label: (*l).into(),
-                status: "ok".into(),
+                status: crate::report::RunStatus::Ok,
                 memory_bytes: m,
                 impostors: m / 100_000,
                 unsolved_cpvs: 0,
@@ -307,4 +307,43 @@ pub fn sample_report() -> crate::report::Report {
             ],
         }),
     }
+}
+
+/// Places `job` over a scene without geometry (the job must need none).
+#[cfg(test)]
+pub fn try_place(
+    scene: &Scene,
+    job: &Job,
+    opts: &crate::place::PlaceOptions,
+    ctl: &crate::control::Control,
+) -> crate::Result<crate::place::PlaceOutput> {
+    let input = crate::input::SceneInput::from_scene(scene, job)?;
+    input.prepare(job, "job")?.place(opts, ctl)
+}
+
+/// The placement of `job` over a scene without geometry, default options.
+#[cfg(test)]
+pub fn place(scene: &Scene, job: &Job) -> crate::api::placement::Placement {
+    try_place(
+        scene,
+        job,
+        &crate::place::PlaceOptions::default(),
+        &crate::control::Control::default(),
+    )
+    .expect("the job places")
+    .placement
+}
+
+/// Evaluates `placement` of `job` over a scene without geometry.
+#[cfg(test)]
+pub fn evaluate(
+    scene: &Scene,
+    job: &Job,
+    placement: &crate::api::placement::Placement,
+    opts: &crate::evaluate::EvalOptions,
+) -> crate::Result<crate::api::evaluation::Evaluation> {
+    let input = crate::input::SceneInput::from_scene(scene, job)?;
+    input
+        .prepare(job, "job")?
+        .evaluate(placement, opts, "placement")
 }

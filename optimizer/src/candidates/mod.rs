@@ -30,6 +30,7 @@ use glam::DVec3;
 use rayon::prelude::*;
 
 use crate::api::job::{Job, Method};
+use crate::math::IdRange;
 use crate::math::geom::Aabb;
 use crate::model::impostor::{ImpostorModel, ImpostorSpec, ViewCell};
 use crate::views::{Context, ProblemViews};
@@ -45,8 +46,8 @@ pub struct Candidate {
     pub kd: u32,
     /// Layers, resolution, memory.
     pub spec: ImpostorSpec,
-    /// The cells it serves: `Candidates::served[served.0 .. served.0 + served.1]`.
-    pub served: (u32, u32),
+    /// The groups it serves: `Candidates::served[served.start..served.end]`.
+    pub served: IdRange,
 }
 
 /// The generated candidates, ordered by (node, key): ids are indices, and
@@ -71,10 +72,8 @@ pub struct Candidates {
 /// One cell's CPVs that list one cluster.
 #[derive(Clone, Copy, Debug)]
 pub struct Group {
-    /// The range `pairs[start..end]`.
-    pub start: u32,
-    /// End of the range.
-    pub end: u32,
+    /// Its pairs: `Candidates::pairs[pairs.start..pairs.end]`.
+    pub pairs: IdRange,
     /// The cell (kd leaf) of the CPVs.
     pub kd: u32,
     /// Distance from the cell's region to the cluster's sphere centre; all
@@ -87,10 +86,9 @@ impl Candidates {
     /// CPV candidate `i` may serve (its region lies in the view cell, it lists
     /// the cluster, and the impostor may accelerate its cell).
     pub fn for_each_served(&self, i: u32, mut f: impl FnMut(u32, u32)) {
-        let (s, n) = self.list[i as usize].served;
-        for &g in &self.served[s as usize..(s + n) as usize] {
+        for &g in &self.served[self.list[i as usize].served.indices()] {
             let gr = self.groups[g as usize];
-            for &(c, idx) in &self.pairs[gr.start as usize..gr.end as usize] {
+            for &(c, idx) in &self.pairs[gr.pairs.indices()] {
                 f(c, idx);
             }
         }
@@ -345,8 +343,7 @@ pub fn generate(ctx: &Context, job: &Job, pv: &ProblemViews) -> Candidates {
             if k == b || pv.cpvs[pairs[k].0 as usize].kd != pv.cpvs[pairs[s].0 as usize].kd {
                 let first = &pv.cpvs[pairs[s].0 as usize];
                 groups.push(Group {
-                    start: s as u32,
-                    end: k as u32,
+                    pairs: IdRange::new(s as u32, k as u32),
                     kd: first.kd,
                     dist: first.region.distance_to_point(center),
                 });
@@ -370,7 +367,7 @@ pub fn generate(ctx: &Context, job: &Job, pv: &ProblemViews) -> Candidates {
             let corner_dirs: Vec<[DVec3; 8]> = (g0..g1)
                 .map(|g| {
                     let gr = groups[g as usize];
-                    let region = pv.cpvs[pairs[gr.start as usize].0 as usize].region;
+                    let region = pv.cpvs[pairs[gr.pairs.start as usize].0 as usize].region;
                     region.corners().map(|p| (p - sphere.center).normalize())
                 })
                 .collect();
@@ -379,7 +376,7 @@ pub fn generate(ctx: &Context, job: &Job, pv: &ProblemViews) -> Candidates {
             let mut tuples: Vec<(Key, u32)> = Vec::new();
             for g in g0..g1 {
                 let gr = groups[g as usize];
-                let group = &pairs[gr.start as usize..gr.end as usize];
+                let group = &pairs[gr.pairs.indices()];
                 let first = &pv.cpvs[group[0].0 as usize];
                 let region = first.region;
                 let dist = gr.dist;
@@ -532,7 +529,7 @@ pub fn generate(ctx: &Context, job: &Job, pv: &ProblemViews) -> Candidates {
                 let mut grid_widest = 0.0f64;
                 let mut s = i;
                 for (c, &t) in ends.iter().enumerate() {
-                    let len = (t - i) as u32;
+                    let served_end = start + (t - i) as u32;
                     let cand = match tuples[s].0 {
                         Key::Shaft { angle, m, j, k } => {
                             let alpha = alphas[angle as usize];
@@ -567,7 +564,7 @@ pub fn generate(ctx: &Context, job: &Job, pv: &ProblemViews) -> Candidates {
                                 },
                                 kd: u32::MAX,
                                 spec,
-                                served: (start, len),
+                                served: IdRange::new(start, served_end),
                             })
                         }
                         Key::Box { kd } => {
@@ -577,7 +574,7 @@ pub fn generate(ctx: &Context, job: &Job, pv: &ProblemViews) -> Candidates {
                                 cell: ViewCell::Box(aabb),
                                 kd,
                                 spec,
-                                served: (start, len),
+                                served: IdRange::new(start, served_end),
                             })
                         }
                     };
@@ -608,7 +605,7 @@ pub fn generate(ctx: &Context, job: &Job, pv: &ProblemViews) -> Candidates {
     for (mut cands, local) in per_node {
         let offset = served.len() as u32;
         for c in &mut cands {
-            c.served.0 += offset;
+            c.served = IdRange::new(c.served.start + offset, c.served.end + offset);
         }
         list.extend(cands);
         served.extend(local);

@@ -23,6 +23,7 @@ use crate::api::evaluation::{ImageReport, MismatchSpread, PsnrSpread, WorstView}
 use crate::api::job::Job;
 use crate::api::placement::Placement;
 use crate::bake::{Layer, cluster_triangles, geom_objects, surface};
+use crate::input::Prepared;
 use crate::math::geom::{ViewFrustum, face_direction};
 use crate::math::rng::Rng;
 use crate::render::raster::{Raster, Surface, TextureRef, Vertex, View, Wrap};
@@ -375,6 +376,63 @@ pub fn image_error(
     };
     let pair = results.into_iter().nth(worst).map(|r| r.3);
     Ok((report, pair))
+}
+
+/// Where the impostor layers of an image check come from.
+#[derive(Clone, Copy, Debug)]
+pub enum LayerSource<'b> {
+    /// Baked in memory from the placement.
+    Bake,
+    /// Read from a GLB written by `impostor bake`, named `name` in errors.
+    Glb {
+        /// The GLB.
+        bytes: &'b [u8],
+        /// How errors name it.
+        name: &'b str,
+    },
+}
+
+impl Prepared<'_> {
+    /// Renders `opts.views` views in problem views with impostors twice (all
+    /// geometry; geometry with the impostor layers) and reports the image
+    /// error, with the worst view's pair. Needs the scene's geometry
+    /// ([`GeometryUse::Required`](crate::input::GeometryUse)). `source`
+    /// names the placement in errors.
+    pub fn image_error(
+        &self,
+        placement: &Placement,
+        layers: LayerSource<'_>,
+        opts: &ImageOptions,
+        source: &str,
+    ) -> Result<(ImageReport, Option<ImagePair>)> {
+        let geom = self.input().geometry.as_ref().ok_or_else(|| {
+            Error::bad(
+                source,
+                "the image check needs the scene's geometry (a .glb/.gltf scene)",
+            )
+        })?;
+        let layers = match layers {
+            LayerSource::Bake => crate::bake::render_layers(geom, placement, source)?,
+            LayerSource::Glb { bytes, name } => crate::bake::read_layers(bytes, name)?,
+        };
+        image_error(geom, self.job(), placement, &layers, opts)
+    }
+}
+
+impl ImagePair {
+    /// The two renders side by side (geometry left, impostors right) with a
+    /// 4-pixel gap, as PNG.
+    pub fn side_by_side_png(&self) -> Result<Vec<u8>> {
+        let (w, h, gap) = (self.width as usize, self.height as usize, 4usize);
+        let out_w = 2 * w + gap;
+        let mut out = vec![255u8; out_w * h * 4];
+        for y in 0..h {
+            let row = &mut out[y * out_w * 4..(y + 1) * out_w * 4];
+            row[..w * 4].copy_from_slice(&self.geometry[y * w * 4..(y + 1) * w * 4]);
+            row[(w + gap) * 4..].copy_from_slice(&self.impostors[y * w * 4..(y + 1) * w * 4]);
+        }
+        crate::bake::encode_png(&out, out_w as u32, h as u32)
+    }
 }
 
 #[cfg(test)]

@@ -23,10 +23,12 @@
 
 use std::cmp::Ordering;
 use std::collections::BinaryHeap;
+use std::ops::Range;
 
 use rayon::prelude::*;
 
 use crate::candidates::{Candidate, Candidates};
+use crate::math::IdRange;
 use crate::math::geom::Sphere;
 use crate::model::cost::Cost;
 use crate::views::{Context, Cpv, ProblemViews};
@@ -197,12 +199,11 @@ impl<'a> State<'a> {
         let all = self.all;
         let cand = &self.cands[i as usize];
         let s = self.ctx.hierarchy.nodes[cand.node as usize].sphere;
-        let (start, n) = cand.served;
-        for &g in &all.served[start as usize..(start + n) as usize] {
+        for &g in &all.served[cand.served.indices()] {
             let gr = all.groups[g as usize];
             // All CPVs of a group share their region, hence the impostor's cost.
             let imp = self.ctx.model.impostor(cand.spec.layers, s.radius, gr.dist);
-            for &(c, idx) in &all.pairs[gr.start as usize..gr.end as usize] {
+            for &(c, idx) in &all.pairs[gr.pairs.indices()] {
                 if let Some(e) = self.effect(c, idx, imp) {
                     f(c, idx, e);
                 }
@@ -213,24 +214,23 @@ impl<'a> State<'a> {
     fn score(&self, i: u32) -> f64 {
         let c = &self.cands[i as usize];
         let s = self.ctx.hierarchy.nodes[c.node as usize].sphere;
-        let (start, n) = (c.served.0 as usize, c.served.1 as usize);
         let mut sum = 0.0;
-        self.add_gains(s, c.spec.layers, start, start + n, &mut sum);
+        self.add_gains(s, c.spec.layers, c.served.indices(), &mut sum);
         sum / c.spec.memory_bytes.max(1) as f64
     }
 
-    /// Adds to `sum` the gains of the groups `served[from..to]` for an
+    /// Adds to `sum` the gains of the groups `served[groups]` for an
     /// impostor of `layers` layers of the cluster with sphere `s`, counting
     /// only CPVs still above `t_max`.
-    fn add_gains(&self, s: Sphere, layers: u32, from: usize, to: usize, sum: &mut f64) {
+    fn add_gains(&self, s: Sphere, layers: u32, groups: Range<usize>, sum: &mut f64) {
         let all = self.all;
-        for &g in &all.served[from..to] {
+        for &g in &all.served[groups] {
             let gr = all.groups[g as usize];
             if self.unsolved_in_cell[gr.kd as usize] == 0 {
                 continue;
             }
             let imp = self.ctx.model.impostor(layers, s.radius, gr.dist);
-            for &(c, idx) in &all.pairs[gr.start as usize..gr.end as usize] {
+            for &(c, idx) in &all.pairs[gr.pairs.indices()] {
                 if self.ctx.model.frame_time(self.sel.cpv_cost[c as usize]) <= self.ctx.t_max {
                     continue;
                 }
@@ -245,19 +245,19 @@ impl<'a> State<'a> {
     /// growing prefixes of the same groups (see [`blocks`]). Equal to
     /// [`score`](Self::score) of each, bit for bit, but a run of candidates
     /// with the same layer count walks the groups once.
-    fn score_block(&self, first: u32, end: u32) -> Vec<f64> {
-        let mut out = Vec::with_capacity((end - first) as usize);
-        let mut j = first as usize;
+    fn score_block(&self, block: IdRange) -> Vec<f64> {
+        let end = block.end;
+        let mut out = Vec::with_capacity(block.len() as usize);
+        let mut j = block.start as usize;
         while j < end as usize {
             let c0 = &self.cands[j];
             let s = self.ctx.hierarchy.nodes[c0.node as usize].sphere;
-            let start = c0.served.0 as usize;
-            let (mut sum, mut pos) = (0.0, 0usize);
+            let (mut sum, mut pos) = (0.0, c0.served.start as usize);
             let mut k = j;
             while k < end as usize && self.cands[k].spec.layers == c0.spec.layers {
-                let len = self.cands[k].served.1 as usize;
-                self.add_gains(s, c0.spec.layers, start + pos, start + len, &mut sum);
-                pos = len;
+                let end = self.cands[k].served.end as usize;
+                self.add_gains(s, c0.spec.layers, pos..end, &mut sum);
+                pos = end;
                 out.push(sum / self.cands[k].spec.memory_bytes.max(1) as f64);
                 k += 1;
             }
@@ -339,23 +339,23 @@ fn listed_ancestors(ctx: &Context, ids: &[u32]) -> Vec<u32> {
     up
 }
 
-/// Per candidate, the first and one-past-last candidate of its block: the
-/// candidates of one cluster that serve growing prefixes of the same served
-/// groups (one shaft angle and axis); a box is a block of its own.
-fn blocks(cands: &[Candidate]) -> Vec<(u32, u32)> {
-    let mut out = vec![(0, 0); cands.len()];
+/// Per candidate, the candidates of its block: the candidates of one
+/// cluster that serve growing prefixes of the same served groups (one shaft
+/// angle and axis); a box is a block of its own.
+fn blocks(cands: &[Candidate]) -> Vec<IdRange> {
+    let mut out = vec![IdRange::default(); cands.len()];
     let mut i = 0;
     while i < cands.len() {
         let mut e = i + 1;
         while e < cands.len()
             && cands[e].node == cands[i].node
-            && cands[e].served.0 == cands[i].served.0
-            && cands[e].served.1 >= cands[e - 1].served.1
+            && cands[e].served.start == cands[i].served.start
+            && cands[e].served.end >= cands[e - 1].served.end
         {
             e += 1;
         }
         for o in &mut out[i..e] {
-            *o = (i as u32, e as u32);
+            *o = IdRange::new(i as u32, e as u32);
         }
         i = e;
     }
@@ -392,11 +392,11 @@ pub fn select_lazy(
     // the work); a block's fresh keys make its older keys outdated.
     let blocks = blocks(&cands.list);
     let firsts: Vec<u32> = (0..cands.list.len() as u32)
-        .filter(|&i| blocks[i as usize].0 == i)
+        .filter(|&i| blocks[i as usize].start == i)
         .collect();
     let initial: Vec<f64> = firsts
         .par_iter()
-        .flat_map_iter(|&b| st.score_block(b, blocks[b as usize].1))
+        .flat_map_iter(|&b| st.score_block(blocks[b as usize]))
         .collect();
     st.sel.evaluations = initial.len() as u64;
     let mut latest = vec![0u64; cands.list.len()];
@@ -440,7 +440,7 @@ pub fn select_lazy(
                 }
                 Some(&(k, s)) if s != version => {
                     heap.pop();
-                    let b = blocks[k.id as usize].0;
+                    let b = blocks[k.id as usize].start;
                     if !stale.contains(&b) {
                         stale.push(b);
                     }
@@ -450,7 +450,7 @@ pub fn select_lazy(
         }
         let fresh: Vec<Vec<f64>> = stale
             .par_iter()
-            .map(|&b| st.score_block(b, blocks[b as usize].1))
+            .map(|&b| st.score_block(blocks[b as usize]))
             .collect();
         for (&b, scores) in stale.iter().zip(fresh) {
             st.sel.evaluations += scores.len() as u64;
@@ -546,29 +546,31 @@ pub fn prune(ctx: &Context, pv: &ProblemViews, cands: &Candidates, sel: &mut Sel
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::control::Control;
     use crate::scene::hierarchy::Hierarchy;
     use crate::testutil::{synthetic_city, synthetic_job};
     use crate::views;
+    use crate::views::{Counters, MAX_PAIRS};
 
     #[test]
     fn block_scores_equal_single_scores_bit_for_bit() {
         let scene = synthetic_city(3, 5, 5);
         let job = synthetic_job(5, 5);
         let h = Hierarchy::build(&scene);
-        let ctx = Context::new(&scene, &h, &job);
-        let pv = views::approximate(&ctx, &job);
+        let ctx = Context::new(&scene, &h, None, &job, Control::default());
+        let pv = views::approximate(&ctx, &job, &Counters::new(MAX_PAIRS));
         let cands = crate::candidates::generate(&ctx, &job, &pv);
         let mut st = State::new(&ctx, &pv, &cands);
         let blocks = blocks(&cands.list);
         // Blocks with several candidates exist (nested shafts).
-        assert!(blocks.iter().any(|&(a, b)| b - a > 2));
+        assert!(blocks.iter().any(|b| b.len() > 2));
         let check = |st: &State| {
-            for (i, &(a, b)) in blocks.iter().enumerate() {
-                if i as u32 == a {
-                    let single: Vec<u64> = (a..b).map(|k| st.score(k).to_bits()).collect();
-                    let block: Vec<u64> =
-                        st.score_block(a, b).iter().map(|s| s.to_bits()).collect();
-                    assert_eq!(single, block, "block {a}..{b}");
+            for (i, &b) in blocks.iter().enumerate() {
+                if i as u32 == b.start {
+                    let single: Vec<u64> =
+                        (b.start..b.end).map(|k| st.score(k).to_bits()).collect();
+                    let block: Vec<u64> = st.score_block(b).iter().map(|s| s.to_bits()).collect();
+                    assert_eq!(single, block, "block {b:?}");
                 }
             }
         };

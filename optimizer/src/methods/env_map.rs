@@ -22,7 +22,7 @@ use crate::api::placement::{PlacedImpostor, SphereJson, ViewCellJson};
 use crate::math::geom::{Aabb, Sphere, enclosing_cone, face_coords};
 use crate::model::cost::Cost;
 use crate::model::impostor::ImpostorModel;
-use crate::views::{Context, ProblemViews, RegionCosts, enclosed_cost};
+use crate::views::{Context, Counters, ProblemViews, RegionCosts, enclosed_cost};
 use crate::visibility::ObjectSet;
 
 /// The impostors of one environment-map cell.
@@ -151,7 +151,7 @@ pub struct EnvMapPlacement {
 }
 
 /// Places environment maps for every view cell of the job's view space.
-pub fn place(ctx: &Context, job: &Job, pv: &ProblemViews) -> EnvMapPlacement {
+pub fn place(ctx: &Context, job: &Job, pv: &ProblemViews, counters: &Counters) -> EnvMapPlacement {
     let k = block(job, pv);
     let counts = pv.grid.counts;
     let nb = [0, 1, 2].map(|a| counts[a].div_ceil(k[a]));
@@ -218,7 +218,7 @@ pub fn place(ctx: &Context, job: &Job, pv: &ProblemViews) -> EnvMapPlacement {
                     drawn.remove(o);
                 }
             }
-            let costs = RegionCosts::new(ctx, &cpv.region, Some(&drawn));
+            let costs = RegionCosts::new(ctx, &cpv.region, Some(&drawn), counters);
             let cone = enclosing_cone(&cpv.region, &cpv.vdi, ctx.half_diagonal);
             let mut cost = enclosed_cost(ctx, &costs, &cone, &cpv.region, None);
             for &i in &ids {

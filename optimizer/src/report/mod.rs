@@ -78,6 +78,27 @@ pub struct Sweep {
     pub values: Vec<f64>,
 }
 
+/// Whether a run produced a placement.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, JsonSchema)]
+#[serde(rename_all = "lowercase")]
+pub enum RunStatus {
+    /// Placed and evaluated.
+    #[default]
+    Ok,
+    /// Refused or stopped (the run's `error` says why).
+    Failed,
+}
+
+impl RunStatus {
+    /// The status as in JSON and CSV.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            RunStatus::Ok => "ok",
+            RunStatus::Failed => "failed",
+        }
+    }
+}
+
 /// The outcome of one placement run and its evaluation.
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize, JsonSchema)]
 pub struct Run {
@@ -91,7 +112,7 @@ pub struct Run {
     /// The run's target frame time, ms.
     pub target_frame_time_ms: f64,
     /// `ok`, or `failed` (see `error`).
-    pub status: String,
+    pub status: RunStatus,
     /// Why the run failed.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub error: Option<String>,
@@ -194,7 +215,7 @@ pub struct Perturbed {
     /// `objects shuffled (seed 2)`.
     pub label: String,
     /// `ok` or `failed`.
-    pub status: String,
+    pub status: RunStatus,
     /// Impostor memory, bytes.
     pub memory_bytes: u64,
     /// Impostors.

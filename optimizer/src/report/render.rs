@@ -24,7 +24,7 @@ use std::fmt::Write as _;
 
 use self::chart::{Chart, Line, Marker, Series, number, plottable};
 pub use self::csv::csv_files;
-use super::{MethodStability, Report, Run};
+use super::{MethodStability, Report, Run, RunStatus};
 
 /// The knob of the target frame time sweep.
 const TARGET_KNOB: &str = "target_frame_time_ms";
@@ -432,10 +432,10 @@ impl<'a> Page<'a> {
         }
         h.push_str("<p>Not in the chart:</p><ul class=\"left-out\">");
         for x in out {
-            let why = if x.status != "ok" {
+            let why = if x.status != RunStatus::Ok {
                 format!(
                     "{}: {}",
-                    x.status,
+                    x.status.as_str(),
                     x.error.as_deref().unwrap_or("no error given")
                 )
             } else if needs_eval && x.eval.is_none() {
@@ -500,7 +500,7 @@ impl<'a> Page<'a> {
             y_log: true,
             ..Chart::default()
         };
-        let shown = |x: &Run| x.status == "ok" && plottable(x.seconds);
+        let shown = |x: &Run| x.status == RunStatus::Ok && plottable(x.seconds);
         let ok: Vec<&Run> = runs.iter().copied().filter(|x| shown(x)).collect();
         for m in self.methods_of(&ok) {
             let mut pts = Series::new(m, self.color(m), Line::None, Marker::Circle);
@@ -685,7 +685,11 @@ impl<'a> Page<'a> {
         let mut base = Series::new("unperturbed base", INK, Line::None, Marker::Ring);
         for (i, m) in st.methods.iter().enumerate() {
             let x = i as f64;
-            let mut ok: Vec<_> = m.settings.iter().filter(|p| p.status == "ok").collect();
+            let mut ok: Vec<_> = m
+                .settings
+                .iter()
+                .filter(|p| p.status == RunStatus::Ok)
+                .collect();
             ok.sort_by_key(|p| p.memory_bytes);
             let mut s = Series::new(
                 m.method.clone(),
@@ -703,7 +707,7 @@ impl<'a> Page<'a> {
                 ));
             }
             push_nonempty(&mut c, s);
-            if let Some(p) = m.settings.first().filter(|p| p.status == "ok") {
+            if let Some(p) = m.settings.first().filter(|p| p.status == RunStatus::Ok) {
                 base.points.push((x, mb(p.memory_bytes)));
                 base.tips.push(format!(
                     "{}, {}: {:.3} MB",
@@ -772,12 +776,12 @@ impl<'a> Page<'a> {
                 e.and_then(|e| e.parallax_max_px)
                     .filter(|v| v.is_finite())
                     .map_or("–".to_string(), |v| format!("{v:.2}")),
-                if x.status == "ok" {
+                if x.status == RunStatus::Ok {
                     ""
                 } else {
                     " class=\"bad\""
                 },
-                esc(&x.status)
+                x.status.as_str()
             );
             if let Some(err) = &x.error {
                 let _ = writeln!(
@@ -805,7 +809,7 @@ fn stability_table(h: &mut String, m: &MethodStability) {
             "<tr><td>{}</td><td>{}</td><td class=\"n\">{:.3}</td><td class=\"n\">{}</td>\
              <td class=\"n\">{}</td><td class=\"n\">{:.3}</td></tr>",
             esc(&p.label),
-            esc(&p.status),
+            p.status.as_str(),
             mb(p.memory_bytes),
             p.impostors,
             p.unsolved_cpvs,
@@ -890,7 +894,7 @@ fn push_nonempty(c: &mut Chart, s: Series) {
 
 /// Whether a run succeeded and can be placed on a target axis.
 fn is_ok(x: &Run) -> bool {
-    x.status == "ok" && plottable(x.target_frame_time_ms)
+    x.status == RunStatus::Ok && plottable(x.target_frame_time_ms)
 }
 
 /// `knob=value`, or `base` for the base job.
@@ -1073,7 +1077,7 @@ mod tests {
     fn report_text_is_escaped() {
         let mut r = sample_report();
         r.runs[0].error = Some("<script>alert(2)</script>".into());
-        r.runs[0].status = "failed".into();
+        r.runs[0].status = RunStatus::Failed;
         r.methods.push("<b>m</b>".into());
         let html = render_html(&r);
         assert!(!html.contains("<script"), "no raw script from the report");

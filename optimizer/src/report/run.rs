@@ -1,22 +1,20 @@
 //! Running a report: every (method × knob value) placement with its
 //! evaluation, walkthrough frame times, and the stability runs.
 
-use std::collections::HashMap;
 use std::time::Instant;
 
-use indicatif::{ProgressBar, ProgressStyle};
 use serde_json::Value;
 
 use super::{
-    EvalSummary, Machine, MethodStability, Perturbed, Report, Run, SceneInfo, Spread, Stability,
-    Sweep, Walkthrough,
+    EvalSummary, Machine, MethodStability, Perturbed, Report, Run, RunStatus, SceneInfo, Spread,
+    Stability, Sweep, Walkthrough,
 };
+use crate::api::evaluation::Evaluation;
 use crate::api::job::{Job, Method};
-use crate::evaluate::{EvalOptions, Shared, evaluate_shared, frame_times, walkthrough_views};
-use crate::input::SceneInput;
-use crate::place::{Control, PlaceOptions, place_shared};
-use crate::scene::hierarchy::Hierarchy;
-use crate::visibility::Visibility;
+use crate::control::Control;
+use crate::evaluate::{EvalOptions, walkthrough_views};
+use crate::input::{Prepared, SceneInput};
+use crate::place::{PlaceOptions, PlaceOutput};
 use crate::{Error, Result};
 
 /// What a report runs.
@@ -30,8 +28,6 @@ pub struct ReportOptions {
     pub stability: bool,
     /// Views per evaluation.
     pub views: u64,
-    /// Show a progress bar on stderr.
-    pub progress: bool,
 }
 
 /// The knob that sweeps the target frame time.
@@ -168,103 +164,108 @@ pub fn now_rfc3339() -> String {
     )
 }
 
-/// Everything one report run needs to share: the hierarchy and one
-/// visibility per (view space, grid, visibility parameters).
-struct Context<'a> {
-    input: &'a SceneInput,
-    hierarchy: &'a Hierarchy,
-    visibility: HashMap<String, Option<Visibility<'a>>>,
+/// One placement, its evaluation and, when asked, its walkthrough: the
+/// unit of work of a report and of a job of the HTTP service.
+pub struct RunOutput {
+    /// The placement and its stats.
+    pub place: PlaceOutput,
+    /// Its evaluation.
+    pub eval: Evaluation,
+    /// The run as the report lists it.
+    pub run: Run,
+    /// Frame times along the job's walkthrough.
+    pub frames: Option<Vec<f64>>,
 }
 
-impl<'a> Context<'a> {
-    fn key(job: &Job) -> String {
-        serde_json::json!([job.view_space, job.problem_views.cell_size, job.visibility]).to_string()
-    }
-
-    fn shared(&mut self, job: &Job) -> Result<Shared<'_>> {
-        let key = Context::key(job);
-        if !self.visibility.contains_key(&key) {
-            let v = Visibility::new(
-                job,
-                &self.input.scene,
-                self.hierarchy,
-                self.input.visibility_inputs(job),
-            )?;
-            self.visibility.insert(key.clone(), v);
-        }
-        Ok(Shared {
-            hierarchy: self.hierarchy,
-            visibility: self.visibility[&key].as_ref(),
-        })
-    }
-}
-
-/// One placement and its evaluation; `walk` also returns the frame times
-/// along the walkthrough.
-fn one_run(cx: &mut Context, job: &Job, views: u64, walk: bool) -> Result<(Run, Option<Vec<f64>>)> {
-    let input = cx.input;
-    let shared = cx.shared(job)?;
+/// Places `prepared`'s job, evaluates the placement with `eval` and, with
+/// `walk`, follows the job's walkthrough.
+pub fn place_and_evaluate(
+    prepared: &Prepared,
+    eval: &EvalOptions,
+    walk: bool,
+    ctl: &Control,
+) -> Result<RunOutput> {
+    let job = prepared.job();
     let start = Instant::now();
-    let out = place_shared(
-        input,
-        job,
-        &PlaceOptions::default(),
-        &Control::default(),
-        &shared,
-    )?;
+    let out = prepared.place(&PlaceOptions::default(), ctl)?;
     let seconds = start.elapsed().as_secs_f64();
+    ctl.check()?;
     let p = &out.placement;
-    let eval = evaluate_shared(
-        input,
-        job,
-        p,
-        &EvalOptions {
-            views,
-            seed: 1,
-            check_rays: 0,
-            check_objects: 0,
-        },
-        "placement",
-        &shared,
-    )?;
-    let walk = if walk {
-        Some(frame_times(
-            input,
-            job,
-            p,
-            &walkthrough_views(job),
-            "placement",
-            &shared,
-        )?)
+    ctl.progress("evaluate", 0.98, "evaluating the placement");
+    let evaluation = prepared.evaluate(p, eval, "placement")?;
+    let frames = if walk {
+        Some(prepared.frame_times(p, &walkthrough_views(job), "placement")?)
     } else {
         None
     };
-    Ok((
-        Run {
-            method: job.method().name().into(),
-            knob: None,
-            value: None,
-            target_frame_time_ms: job.target_frame_time_ms,
-            status: "ok".into(),
-            error: None,
-            cpvs: p.summary.cpvs,
-            candidates: p.summary.candidates,
-            impostors: p.summary.impostors,
-            memory_bytes: p.summary.memory_bytes,
-            unsolved_cpvs: p.summary.unsolved_cpvs,
-            seconds,
-            stage_seconds: out.stats.seconds,
-            eval: Some(EvalSummary::from(&eval)),
-        },
-        walk,
-    ))
+    let run = Run {
+        method: job.method().name().into(),
+        knob: None,
+        value: None,
+        target_frame_time_ms: job.target_frame_time_ms,
+        status: RunStatus::Ok,
+        error: None,
+        cpvs: p.summary.cpvs,
+        candidates: p.summary.candidates,
+        impostors: p.summary.impostors,
+        memory_bytes: p.summary.memory_bytes,
+        unsolved_cpvs: p.summary.unsolved_cpvs,
+        seconds,
+        stage_seconds: out.stats.seconds.clone(),
+        eval: Some(EvalSummary::from(&evaluation)),
+    };
+    Ok(RunOutput {
+        place: out,
+        eval: evaluation,
+        run,
+        frames,
+    })
+}
+
+/// The preparations of a report's jobs: one visibility per (view space,
+/// grid, visibility parameters), shared by the runs that agree on them.
+struct Preparations<'a> {
+    list: Vec<Prepared<'a>>,
+}
+
+impl<'a> Preparations<'a> {
+    fn for_job(&mut self, input: &'a SceneInput, job: &Job) -> Result<Prepared<'a>> {
+        if let Some(p) = self.list.iter().find(|p| p.shares_visibility_with(job)) {
+            return p.with_job(job);
+        }
+        let p = input.prepare(job, "job")?;
+        let out = p.with_job(job)?;
+        self.list.push(p);
+        Ok(out)
+    }
+}
+
+/// One run of a report: its placement and evaluation (and walkthrough with
+/// `walk`) without the visibility check's rays, which the report does not
+/// show.
+fn one_run<'a>(
+    preps: &mut Preparations<'a>,
+    input: &'a SceneInput,
+    job: &Job,
+    views: u64,
+    walk: bool,
+) -> Result<(Run, Option<Vec<f64>>)> {
+    let prepared = preps.for_job(input, job)?;
+    let eval = EvalOptions {
+        views,
+        seed: 1,
+        check_rays: 0,
+        check_objects: 0,
+    };
+    let out = place_and_evaluate(&prepared, &eval, walk, &Control::default())?;
+    Ok((out.run, out.frames))
 }
 
 fn failed(job: &Job, e: &Error) -> Run {
     Run {
         method: job.method().name().into(),
         target_frame_time_ms: job.target_frame_time_ms,
-        status: "failed".into(),
+        status: RunStatus::Failed,
         error: Some(e.to_string()),
         ..Run::default()
     }
@@ -294,6 +295,7 @@ pub fn run(
     input: &SceneInput,
     job_text: &Value,
     opts: &ReportOptions,
+    ctl: &Control,
 ) -> Result<Report> {
     let base: Job = serde_json::from_value(job_text.clone())
         .map_err(|e| Error::bad("job", format!("invalid job JSON: {e}")))?;
@@ -326,34 +328,26 @@ pub fn run(
         }
     }
     let has_target_sweep = opts.sweeps.iter().any(|s| s.knob == TARGET);
-    let perturbations = if opts.stability { 7 } else { 0 };
+    // Per method: the base, four targets, the shifted grid, two shuffles.
+    let perturbations = if opts.stability { 8 } else { 0 };
     let total = plan.len() + opts.methods.len() * perturbations;
-    let bar = opts.progress.then(|| {
-        let b = ProgressBar::new(total as u64);
-        b.set_style(
-            ProgressStyle::with_template("{bar:30} {pos}/{len} runs [{elapsed_precise}] {msg}")
-                .expect("valid template"),
-        );
-        b
-    });
-    let hierarchy = Hierarchy::build(&input.scene);
-    let mut cx = Context {
-        input,
-        hierarchy: &hierarchy,
-        visibility: HashMap::new(),
+    let mut done = 0usize;
+    let mut step = |message: &str| -> Result<()> {
+        ctl.progress("report", done as f64 / total as f64, message);
+        done += 1;
+        ctl.check()
     };
+    let mut preps = Preparations { list: Vec::new() };
     let mut runs = Vec::new();
     let mut walkthroughs = Vec::new();
     for (setting, job) in &plan {
-        if let Some(b) = &bar {
-            b.set_message(match setting {
-                Some((k, v)) => format!("{} {k}={v}", job.method().name()),
-                None => job.method().name().to_string(),
-            });
-        }
+        step(&match setting {
+            Some((k, v)) => format!("{} {k}={v}", job.method().name()),
+            None => job.method().name().to_string(),
+        })?;
         let is_target = setting.as_ref().is_some_and(|(k, _)| k == TARGET);
         let walk = is_target || (!has_target_sweep && setting.is_none());
-        let mut run = match one_run(&mut cx, job, opts.views, walk) {
+        let mut run = match one_run(&mut preps, input, job, opts.views, walk) {
             Ok((run, frames)) => {
                 if let Some(frame_ms) = frames {
                     walkthroughs.push(Walkthrough {
@@ -372,9 +366,6 @@ pub fn run(
             run.value = Some(*v);
         }
         runs.push(run);
-        if let Some(b) = &bar {
-            b.inc(1);
-        }
     }
     let stability = if opts.stability {
         let mut methods = Vec::new();
@@ -386,7 +377,7 @@ pub fn run(
                 settings.push(match r {
                     Ok((run, _)) => Perturbed {
                         label,
-                        status: "ok".into(),
+                        status: RunStatus::Ok,
                         memory_bytes: run.memory_bytes,
                         impostors: run.impostors,
                         unsolved_cpvs: run.unsolved_cpvs,
@@ -394,21 +385,20 @@ pub fn run(
                     },
                     Err(e) => Perturbed {
                         label: format!("{label}: {e}"),
-                        status: "failed".into(),
+                        status: RunStatus::Failed,
                         ..Perturbed::default()
                     },
                 });
             };
             let views = (opts.views / 4).max(100);
-            record("base".into(), one_run(&mut cx, &j, views, false));
+            step(&format!("{} stability", m.name()))?;
+            record("base".into(), one_run(&mut preps, input, &j, views, false));
             for f in [0.95, 0.99, 1.01, 1.05] {
                 let mut p = j.clone();
                 p.target_frame_time_ms *= f;
                 let label = format!("target {:+.0}%", (f - 1.0) * 100.0);
-                record(label, one_run(&mut cx, &p, views, false));
-                if let Some(b) = &bar {
-                    b.inc(1);
-                }
+                step(&format!("{} stability: {label}", m.name()))?;
+                record(label, one_run(&mut preps, input, &p, views, false));
             }
             // The grid shifted by half a cell (the view space grows by half
             // a cell at its low side along x and z).
@@ -416,30 +406,24 @@ pub fn run(
             let half = 0.5 * p.problem_views.cell_size;
             p.view_space.min[0] -= half;
             p.view_space.min[2] -= half;
+            step(&format!("{} stability: grid shifted", m.name()))?;
             record(
                 "grid shifted by half a cell".into(),
-                one_run(&mut cx, &p, views, false),
+                one_run(&mut preps, input, &p, views, false),
             );
-            if let Some(b) = &bar {
-                b.inc(1);
-            }
             for seed in [1u64, 2] {
+                step(&format!("{} stability: objects shuffled", m.name()))?;
                 let shuffled = input.shuffled(seed);
-                let h2 = Hierarchy::build(&shuffled.scene);
-                let mut cx2 = Context {
-                    input: &shuffled,
-                    hierarchy: &h2,
-                    visibility: HashMap::new(),
-                };
+                let mut own = Preparations { list: Vec::new() };
                 record(
                     format!("objects shuffled (seed {seed})"),
-                    one_run(&mut cx2, &j, views, false),
+                    one_run(&mut own, &shuffled, &j, views, false),
                 );
-                if let Some(b) = &bar {
-                    b.inc(1);
-                }
             }
-            let ok: Vec<&Perturbed> = settings.iter().filter(|s| s.status == "ok").collect();
+            let ok: Vec<&Perturbed> = settings
+                .iter()
+                .filter(|s| s.status == RunStatus::Ok)
+                .collect();
             let memory = spread(&ok.iter().map(|s| s.memory_bytes as f64).collect::<Vec<_>>());
             let impostors = spread(&ok.iter().map(|s| s.impostors as f64).collect::<Vec<_>>());
             methods.push(MethodStability {
@@ -453,9 +437,6 @@ pub fn run(
     } else {
         None
     };
-    if let Some(b) = bar {
-        b.finish_and_clear();
-    }
     let (lo, hi) = input.scene.bounds();
     Ok(Report {
         version: crate::VERSION.into(),

@@ -127,15 +127,42 @@ const APPEARANCE_EXTENSIONS: &[&str] = &[
 ///
 /// Errors name the file as given.
 pub fn load_scene_file(path: &Path) -> Result<Scene> {
-    let source = path.display().to_string();
     let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
-    let is_json_ext = path
+    load_scene_file_bytes(&bytes, path)
+}
+
+/// [`load_scene_file`] of bytes already read from `path`.
+pub fn load_scene_file_bytes(bytes: &[u8], path: &Path) -> Result<Scene> {
+    let source = path.display().to_string();
+    if is_summary_file(bytes, path) {
+        return Scene::from_summary_json(bytes, &source);
+    }
+    dispatch(bytes, &source, Some(base_dir_of(path)))
+}
+
+/// True when a file's bytes are a JSON scene summary rather than glTF: not
+/// a GLB, and a `.json` extension or a top-level `"objects"` key.
+pub fn is_summary_file(bytes: &[u8], path: &Path) -> bool {
+    let json_ext = path
         .extension()
         .is_some_and(|e| e.eq_ignore_ascii_case("json"));
-    if !bytes.starts_with(b"glTF") && is_json_ext {
-        return Scene::from_summary_json(&bytes, &source);
+    (json_ext && !bytes.starts_with(b"glTF")) || is_summary(bytes)
+}
+
+/// True when uploaded bytes are a JSON scene summary (JSON whose top level
+/// has `"objects"`), not a GLB or glTF JSON document.
+pub fn is_summary(bytes: &[u8]) -> bool {
+    /// Top-level keys that tell a scene summary from a glTF document.
+    #[derive(serde::Deserialize)]
+    struct Probe {
+        #[serde(default)]
+        objects: Option<serde::de::IgnoredAny>,
     }
-    dispatch(&bytes, &source, Some(base_dir_of(path)))
+    !bytes.starts_with(b"glTF")
+        && matches!(
+            serde_json::from_slice::<Probe>(bytes),
+            Ok(Probe { objects: Some(_) })
+        )
 }
 
 /// The directory relative resources of a local glTF file are read from.

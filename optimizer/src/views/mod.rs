@@ -11,15 +11,17 @@
 //! parallel; results are collected in kd order, so the output does not depend
 //! on the thread count.
 
-use crate::model::cost::{Cost, CostModel};
-use std::sync::atomic::{AtomicBool, AtomicU64, Ordering as AtomicOrdering};
+mod approximate;
+mod context;
+mod costs;
 
-use crate::api::job::Job;
-use crate::math::geom::{Aabb, Cone, Vdi, enclosing_cone, frustum_half_diagonal};
+pub use approximate::approximate;
+pub use context::{BYTES_PER_PAIR, Context, Counters, MAX_PAIRS};
+pub use costs::{RegionCosts, enclosed_cost, enclosing_time};
+
+use crate::math::geom::{Aabb, Vdi};
 use crate::math::grid::Grid;
-use crate::scene::Scene;
-use crate::scene::hierarchy::Hierarchy;
-use crate::visibility::{ObjectSet, Visibility};
+use crate::model::cost::Cost;
 
 /// A node of the 3D view space hierarchy (pre-order ids, root 0).
 #[derive(Clone, Debug)]
@@ -34,8 +36,6 @@ pub struct KdNode {
     pub children: Option<[u32; 2]>,
     /// Parent (`u32::MAX` for the root).
     pub parent: u32,
-    /// The CPVs inside this region: ids `cpvs.0 .. cpvs.1`.
-    pub cpvs: (u32, u32),
 }
 
 /// A conservative problem view: a minimum-size region and a minimum-size VDI
@@ -100,467 +100,18 @@ pub fn leaf_level(min_vdi_deg: f64) -> u8 {
     l
 }
 
-/// Everything the per-region work needs, shared read-only across threads.
-pub struct Context<'a> {
-    /// The scene.
-    pub scene: &'a Scene,
-    /// The object hierarchy.
-    pub hierarchy: &'a Hierarchy,
-    /// The cost model.
-    pub model: CostModel,
-    /// `t_max`, ms.
-    pub t_max: f64,
-    /// Frustum diagonal half-angle, radians.
-    pub half_diagonal: f64,
-    /// Pitch range, radians.
-    pub pitch: [f64; 2],
-    /// (CPV, cluster) pairs recorded so far; the approximation stops early
-    /// once it exceeds `pair_budget`.
-    pub pairs: AtomicU64,
-    /// The most (CPV, cluster) pairs a run may hold (see [`MAX_PAIRS`]).
-    pub pair_budget: u64,
-    /// When set to true, the approximation and candidate generation stop
-    /// early (the caller reports the cancellation).
-    pub cancel: Option<&'a AtomicBool>,
-    /// From-region visibility: regions count only their potentially
-    /// visible objects.
-    pub visibility: Option<&'a Visibility<'a>>,
-    /// Per level of detail, how often it was chosen for a (region, object)
-    /// pair; the last slot counts objects too small to be drawn.
-    pub lod_levels: Vec<AtomicU64>,
-}
-
-/// The default budget of (CPV, cluster) pairs. Every pair costs about 50
-/// bytes through candidate generation and the greedy, so 300 M pairs need
-/// about 15 GB; a job beyond it is refused instead of exhausting memory.
-pub const MAX_PAIRS: u64 = 300_000_000;
-
-/// Bytes held per (CPV, cluster) pair from the approximation to the greedy.
-pub const BYTES_PER_PAIR: u64 = 49;
-
-impl<'a> Context<'a> {
-    /// The context of a job.
-    pub fn new(scene: &'a Scene, hierarchy: &'a Hierarchy, job: &Job) -> Self {
-        let [w, h] = job.camera.resolution;
-        Context {
-            scene,
-            hierarchy,
-            model: CostModel::new(job),
-            t_max: job.target_frame_time_ms,
-            half_diagonal: frustum_half_diagonal(job.camera.fov_deg, f64::from(w) / f64::from(h)),
-            pitch: job.view_space.pitch_deg.map(f64::to_radians),
-            pairs: AtomicU64::new(0),
-            pair_budget: MAX_PAIRS,
-            cancel: None,
-            visibility: None,
-            lod_levels: (0..=crate::scene::MAX_LODS)
-                .map(|_| AtomicU64::new(0))
-                .collect(),
-        }
-    }
-
-    /// Level-of-detail counters (`None` when no object has levels).
-    pub fn lod_stats(
-        &self,
-        generated: Option<crate::api::stats::LodReport>,
-    ) -> Option<crate::api::stats::LodStats> {
-        let with = self
-            .scene
-            .objects
-            .iter()
-            .filter(|o| !o.lods.is_empty())
-            .count();
-        if with == 0 && generated.is_none() {
-            return None;
-        }
-        let levels = self
-            .scene
-            .objects
-            .iter()
-            .map(|o| o.lods.len())
-            .max()
-            .unwrap_or(0);
-        let mut chosen: Vec<u64> = self.lod_levels[..levels]
-            .iter()
-            .map(|a| a.load(AtomicOrdering::Relaxed))
-            .collect();
-        chosen.push(self.lod_levels[crate::scene::MAX_LODS].load(AtomicOrdering::Relaxed));
-        Some(crate::api::stats::LodStats {
-            objects_with_lods: with as u64,
-            chosen_levels: chosen,
-            generated,
-        })
-    }
-
-    /// True once the recorded pairs exceed the budget.
-    pub fn over_budget(&self) -> bool {
-        self.pairs.load(AtomicOrdering::Relaxed) > self.pair_budget
-    }
-
-    /// True once the run was cancelled.
-    pub fn cancelled(&self) -> bool {
-        self.cancel.is_some_and(|c| c.load(AtomicOrdering::Relaxed))
-    }
-
-    /// True when some direction of `vdi` lies in the pitch range.
-    pub fn pitch_overlaps(&self, vdi: &Vdi) -> bool {
-        let [lo, hi] = vdi.elevation_range();
-        hi >= self.pitch[0] - 1e-12 && lo <= self.pitch[1] + 1e-12
-    }
-}
-
-/// Per-region costs: every object's cost seen from the region's closest point
-/// and every cluster's sum. Objects outside the region's potentially visible
-/// set cost nothing.
-pub struct RegionCosts {
-    /// Per object id.
-    pub objects: Vec<Cost>,
-    /// Per node id.
-    pub nodes: Vec<Cost>,
-}
-
-impl RegionCosts {
-    /// Costs for `region`, counting only the objects of `visible` (all when
-    /// `None`).
-    pub fn new(ctx: &Context, region: &Aabb, visible: Option<&ObjectSet>) -> RegionCosts {
-        let objects: Vec<Cost> = ctx
-            .scene
-            .objects
-            .iter()
-            .zip(&ctx.hierarchy.object_spheres)
-            .enumerate()
-            .map(|(id, (o, s))| {
-                if visible.is_some_and(|v| !v.contains(id as u32)) {
-                    return Cost::default();
-                }
-                let d = region.distance_to_point(s.center);
-                if !o.lods.is_empty() {
-                    let slot = ctx
-                        .model
-                        .lod_level(o, s.radius, d)
-                        .unwrap_or(crate::scene::MAX_LODS);
-                    ctx.lod_levels[slot].fetch_add(1, AtomicOrdering::Relaxed);
-                }
-                ctx.model.object_region(o, s.radius, d)
-            })
-            .collect();
-        let h = ctx.hierarchy;
-        let mut nodes = vec![Cost::default(); h.nodes.len()];
-        for id in (0..h.nodes.len()).rev() {
-            nodes[id] = match h.nodes[id].children {
-                None => h
-                    .objects(id as u32)
-                    .iter()
-                    .fold(Cost::default(), |acc, &o| acc + objects[o as usize]),
-                Some([l, r]) => nodes[l as usize] + nodes[r as usize],
-            };
-        }
-        RegionCosts { objects, nodes }
-    }
-}
-
-/// Cost of all objects whose bounding sphere meets `cone`. When `emit` is
-/// given, also lists every cluster meeting the cone whose sphere does not meet
-/// `region`, with the cost of its objects inside the cone.
-pub fn enclosed_cost(
-    ctx: &Context,
-    costs: &RegionCosts,
-    cone: &Cone,
-    region: &Aabb,
-    mut emit: Option<&mut Vec<(u32, Cost)>>,
-) -> Cost {
-    fn visit(
-        ctx: &Context,
-        costs: &RegionCosts,
-        cone: &Cone,
-        region: &Aabb,
-        n: u32,
-        emit: &mut Option<&mut Vec<(u32, Cost)>>,
-    ) -> Cost {
-        let h = ctx.hierarchy;
-        let node = &h.nodes[n as usize];
-        let s = node.sphere;
-        if !cone.intersects_sphere(s.center, s.radius) {
-            return Cost::default();
-        }
-        let replaceable = |m: u32| {
-            let s = h.nodes[m as usize].sphere;
-            !region.intersects_sphere(s.center, s.radius)
-        };
-        if cone.contains_sphere(s.center, s.radius) {
-            if let Some(out) = emit.as_deref_mut() {
-                for m in n..node.subtree_end {
-                    let c = costs.nodes[m as usize];
-                    if (c.cpu > 0.0 || c.gpu > 0.0) && replaceable(m) {
-                        out.push((m, costs.nodes[m as usize]));
-                    }
-                }
-            }
-            return costs.nodes[n as usize];
-        }
-        let c = match node.children {
-            None => {
-                let mut c = Cost::default();
-                for &o in h.objects(n) {
-                    let os = &h.object_spheres[o as usize];
-                    if cone.intersects_sphere(os.center, os.radius) {
-                        c += costs.objects[o as usize];
-                    }
-                }
-                c
-            }
-            Some([l, r]) => {
-                visit(ctx, costs, cone, region, l, emit) + visit(ctx, costs, cone, region, r, emit)
-            }
-        };
-        if let Some(out) = emit.as_deref_mut()
-            && (c.cpu > 0.0 || c.gpu > 0.0)
-            && replaceable(n)
-        {
-            out.push((n, c));
-        }
-        c
-    }
-    visit(ctx, costs, cone, region, 0, &mut emit)
-}
-
-/// Builds the kd tree over the grid (pre-order).
-fn build_kd(grid: &Grid) -> Vec<KdNode> {
-    let mut kd = Vec::new();
-    let mut stack = vec![([0u32; 3], grid.counts, u32::MAX)];
-    while let Some((lo, hi, parent)) = stack.pop() {
-        let id = kd.len() as u32;
-        if parent != u32::MAX {
-            let p: &mut KdNode = &mut kd[parent as usize];
-            match &mut p.children {
-                None => p.children = Some([id, u32::MAX]),
-                Some(c) => c[1] = id,
-            }
-        }
-        let sizes = [0, 1, 2].map(|a| hi[a] - lo[a]);
-        let axis = if sizes[0] >= sizes[1] && sizes[0] >= sizes[2] {
-            0
-        } else if sizes[1] >= sizes[2] {
-            1
-        } else {
-            2
-        };
-        if sizes[axis] > 1 {
-            let mid = lo[axis] + sizes[axis] / 2;
-            let (mut hi_l, mut lo_r) = (hi, lo);
-            hi_l[axis] = mid;
-            lo_r[axis] = mid;
-            stack.push((lo_r, hi, id));
-            stack.push((lo, hi_l, id));
-        }
-        kd.push(KdNode {
-            lo,
-            hi,
-            aabb: grid.cell_box(lo, hi),
-            children: None,
-            parent,
-            cpvs: (0, 0),
-        });
-    }
-    kd
-}
-
-/// Sorted list of every quadtree ancestor (including itself) of the given
-/// leaves, for "does this VDI contain a parent problem" queries.
-fn ancestors(leaves: &[Vdi]) -> Vec<Vdi> {
-    let mut out = Vec::with_capacity(leaves.len() * 4);
-    for l in leaves {
-        for up in 0..=l.level {
-            out.push(Vdi {
-                face: l.face,
-                level: l.level - up,
-                iu: l.iu >> up,
-                iv: l.iv >> up,
-            });
-        }
-    }
-    out.sort_unstable();
-    out.dedup();
-    out
-}
-
-struct RegionResult {
-    cpvs: Vec<Cpv>,
-    cones: u64,
-    regions: u64,
-}
-
-fn process(
-    ctx: &Context,
-    kd: &[KdNode],
-    id: u32,
-    parent_problems: &[Vdi],
-    leaf_level: u8,
-) -> RegionResult {
-    let node = &kd[id as usize];
-    if ctx.over_budget() || ctx.cancelled() {
-        return RegionResult {
-            cpvs: Vec::new(),
-            cones: 0,
-            regions: 0,
-        };
-    }
-    let region = node.aabb;
-    let visible = ctx.visibility.and_then(|v| v.region(node.lo, node.hi));
-    let costs = RegionCosts::new(ctx, &region, visible.as_deref());
-    let open = ancestors(parent_problems);
-    let mut problems: Vec<(Vdi, f64)> = Vec::new();
-    let mut cones = 0u64;
-    let mut stack: Vec<Vdi> = (0..6u8).rev().map(Vdi::face).collect();
-    while let Some(vdi) = stack.pop() {
-        if open.binary_search(&vdi).is_err() || !ctx.pitch_overlaps(&vdi) {
-            continue;
-        }
-        let cone = enclosing_cone(&region, &vdi, ctx.half_diagonal);
-        cones += 1;
-        let t = ctx
-            .model
-            .frame_time(enclosed_cost(ctx, &costs, &cone, &region, None));
-        if t <= ctx.t_max {
-            continue;
-        }
-        if vdi.level == leaf_level {
-            problems.push((vdi, t));
-        } else {
-            stack.extend(vdi.children().into_iter().rev());
-        }
-    }
-    if problems.is_empty() {
-        return RegionResult {
-            cpvs: Vec::new(),
-            cones,
-            regions: 1,
-        };
-    }
-    match node.children {
-        None => {
-            let cpvs = problems
-                .into_iter()
-                .map(|(vdi, _)| {
-                    let cone = enclosing_cone(&region, &vdi, ctx.half_diagonal);
-                    let mut nodes = Vec::new();
-                    let cost = enclosed_cost(ctx, &costs, &cone, &region, Some(&mut nodes));
-                    let t = ctx.model.frame_time(cost);
-                    let h = ctx.hierarchy;
-                    // Keep the clusters some impostor could accelerate: an
-                    // impostor has at least one layer.
-                    nodes.retain(|&(n, orig)| {
-                        let s = h.nodes[n as usize].sphere;
-                        let imp =
-                            ctx.model
-                                .impostor(1, s.radius, region.distance_to_point(s.center));
-                        ctx.model.frame_time(cost - orig + imp) < t
-                    });
-                    nodes.sort_unstable_by_key(|&(n, _)| n);
-                    Cpv {
-                        kd: id,
-                        region,
-                        vdi,
-                        cost,
-                        time: t,
-                        node_ids: nodes.iter().map(|&(n, _)| n).collect(),
-                        node_costs: nodes.iter().map(|&(_, c)| c).collect(),
-                    }
-                })
-                .collect::<Vec<Cpv>>();
-            let pairs: usize = cpvs.iter().map(|c| c.node_ids.len()).sum();
-            ctx.pairs.fetch_add(pairs as u64, AtomicOrdering::Relaxed);
-            RegionResult {
-                cpvs,
-                cones,
-                regions: 1,
-            }
-        }
-        Some([l, r]) => {
-            drop(costs);
-            let leaves: Vec<Vdi> = problems.into_iter().map(|(v, _)| v).collect();
-            let (mut a, b) = rayon::join(
-                || process(ctx, kd, l, &leaves, leaf_level),
-                || process(ctx, kd, r, &leaves, leaf_level),
-            );
-            a.cpvs.extend(b.cpvs);
-            RegionResult {
-                cpvs: a.cpvs,
-                cones: cones + a.cones + b.cones,
-                regions: 1 + a.regions + b.regions,
-            }
-        }
-    }
-}
-
-/// Approximates the problem view space of `job` over `scene`.
-pub fn approximate(ctx: &Context, job: &Job) -> ProblemViews {
-    let grid = job.grid();
-    let mut kd = build_kd(&grid);
-    let level = leaf_level(job.problem_views.min_vdi_deg);
-    let n = 1u32 << level;
-    let all: Vec<Vdi> = (0..6u8)
-        .flat_map(|face| {
-            (0..n).flat_map(move |iv| {
-                (0..n).map(move |iu| Vdi {
-                    face,
-                    level,
-                    iu,
-                    iv,
-                })
-            })
-        })
-        .collect();
-    let res = process(ctx, &kd, 0, &all, level);
-    // CPV ranges per kd node: CPVs come in kd pre-order, so every subtree's
-    // CPVs are contiguous.
-    let mut first = vec![u32::MAX; kd.len()];
-    let mut last = vec![0u32; kd.len()];
-    for (i, c) in res.cpvs.iter().enumerate() {
-        let mut k = c.kd;
-        loop {
-            let kn = k as usize;
-            first[kn] = first[kn].min(i as u32);
-            last[kn] = last[kn].max(i as u32 + 1);
-            k = kd[kn].parent;
-            if k == u32::MAX {
-                break;
-            }
-        }
-    }
-    for (i, node) in kd.iter_mut().enumerate() {
-        node.cpvs = if first[i] == u32::MAX {
-            (0, 0)
-        } else {
-            (first[i], last[i])
-        };
-    }
-    ProblemViews {
-        grid,
-        kd,
-        cpvs: res.cpvs,
-        leaf_level: level,
-        cone_evaluations: res.cones,
-        regions_visited: res.regions,
-    }
-}
-
-/// Estimated frame time of views in `region` with directions in `vdi`, using
-/// the enclosing frustum and every object (for tests and baselines).
-pub fn enclosing_time(ctx: &Context, region: &Aabb, vdi: &Vdi) -> f64 {
-    let costs = RegionCosts::new(ctx, region, None);
-    let cone = enclosing_cone(region, vdi, ctx.half_diagonal);
-    ctx.model
-        .frame_time(enclosed_cost(ctx, &costs, &cone, region, None))
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
-    use glam::DVec3;
+    use crate::api::job::Job;
+    use crate::control::Control;
     use crate::math::geom::{ViewFrustum, face_direction};
+    use crate::math::geom::{enclosing_cone, frustum_half_diagonal};
     use crate::math::rng::Rng;
     use crate::scene::Object;
+    use crate::scene::Scene;
+    use crate::scene::hierarchy::Hierarchy;
+    use glam::DVec3;
 
     /// Property: every object hit by an exact view frustum at a sampled
     /// position and direction of (region, VDI) is in the enclosing set.
@@ -632,8 +183,8 @@ mod tests {
         let scene = crate::testutil::synthetic_city(5, 6, 6);
         let job = crate::testutil::synthetic_job(6, 6);
         let h = Hierarchy::build(&scene);
-        let ctx = Context::new(&scene, &h, &job);
-        let pv = approximate(&ctx, &job);
+        let ctx = Context::new(&scene, &h, None, &job, Control::default());
+        let pv = approximate(&ctx, &job, &Counters::new(MAX_PAIRS));
         assert!(
             !pv.cpvs.is_empty(),
             "the synthetic job must have problem views"
@@ -658,7 +209,11 @@ mod tests {
             }],
         };
         let h2 = Hierarchy::build(&tiny);
-        let ctx2 = Context::new(&tiny, &h2, &job);
-        assert!(approximate(&ctx2, &job).cpvs.is_empty());
+        let ctx2 = Context::new(&tiny, &h2, None, &job, Control::default());
+        assert!(
+            approximate(&ctx2, &job, &Counters::new(MAX_PAIRS))
+                .cpvs
+                .is_empty()
+        );
     }
 }

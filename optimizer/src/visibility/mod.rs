@@ -29,7 +29,7 @@ use std::time::Instant;
 use rayon::prelude::*;
 
 use crate::api::job::{Job, VisibilityMode};
-use crate::api::pvs::PvsFile;
+use crate::api::pvs::{PvsCell, PvsFile};
 use crate::api::stats::{OccluderStats, VisibilityStats};
 use crate::math::geom::Aabb;
 use crate::math::grid::Grid;
@@ -281,6 +281,32 @@ impl<'a> Visibility<'a> {
                     covered: false,
                 },
             },
+        }
+    }
+
+    /// The potentially visible set of every grid cell, as a PVS file that
+    /// `"visibility": "precomputed"` can reuse (cells computed in parallel).
+    pub fn to_pvs_file(&self) -> PvsFile {
+        let g = &self.grid;
+        let cells: Vec<[u32; 3]> = (0..g.counts[2])
+            .flat_map(|z| {
+                (0..g.counts[1]).flat_map(move |y| (0..g.counts[0]).map(move |x| [x, y, z]))
+            })
+            .collect();
+        self.prefetch(&cells);
+        PvsFile {
+            objects: self.scene.objects.len() as u64,
+            cells: cells
+                .iter()
+                .map(|&c| {
+                    let b = g.cell_box(c, c.map(|x| x + 1));
+                    PvsCell {
+                        min: b.min.to_array(),
+                        max: b.max.to_array(),
+                        visible: self.cell(c).set.iter().collect(),
+                    }
+                })
+                .collect(),
         }
     }
 

@@ -64,7 +64,7 @@ fn runs_csv(runs: &[Run]) -> String {
             run.knob.clone().unwrap_or_default(),
             run.value.map(|v| v.to_string()).unwrap_or_default(),
             run.target_frame_time_ms.to_string(),
-            run.status.clone(),
+            run.status.as_str().into(),
             run.error.clone().unwrap_or_default(),
             run.cpvs.to_string(),
             run.candidates.to_string(),
@@ -139,7 +139,7 @@ fn stability_csv(r: &Report) -> String {
                 [
                     m.method.clone(),
                     p.label.clone(),
-                    p.status.clone(),
+                    p.status.as_str().into(),
                     p.memory_bytes.to_string(),
                     p.impostors.to_string(),
                     p.unsolved_cpvs.to_string(),

@@ -1,0 +1,71 @@
+//! `impostor bake`: a placement's impostors rendered into one GLB.
+
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+use clap::Args;
+use optimizer::Result;
+use optimizer::api::job::MemoryParams;
+use optimizer::bake::{self, BakeOptions};
+use optimizer::scene::geometry;
+
+use crate::evaluate::read_placement;
+use crate::output::{write_json, write_output};
+use crate::{read_job, set_threads};
+
+#[derive(Args)]
+pub struct BakeArgs {
+    /// Scene with geometry: .glb or .gltf (a JSON scene summary has none).
+    scene: PathBuf,
+    /// Placement JSON written by `place` for this scene.
+    #[arg(long)]
+    placement: PathBuf,
+    /// Job JSON (its memory model is used for the baked-memory report;
+    /// default: the reference memory model).
+    #[arg(long)]
+    job: Option<PathBuf>,
+    /// Output GLB.
+    #[arg(short, long)]
+    out: PathBuf,
+    /// Write the bake report (layers, atlases, texels, memory) to this JSON file.
+    #[arg(long)]
+    report: Option<PathBuf>,
+    /// Worker threads (default: all cores).
+    #[arg(long)]
+    threads: Option<usize>,
+}
+
+pub fn run(a: BakeArgs) -> Result<ExitCode> {
+    set_threads(a.threads)?;
+    let memory = match &a.job {
+        Some(j) => read_job(j)?.memory,
+        None => MemoryParams::default(),
+    };
+    let p = read_placement(&a.placement)?;
+    let geom = geometry::load_geometry_file(&a.scene)?;
+    let start = std::time::Instant::now();
+    let (glb, rep) = bake::bake(
+        &geom,
+        &memory,
+        &p,
+        &BakeOptions::default(),
+        &a.placement.display().to_string(),
+    )?;
+    write_output(Some(&a.out), &glb)?;
+    if let Some(r) = &a.report {
+        write_json(Some(r), &rep)?;
+    }
+    eprintln!(
+        "{} impostors, {} of {} layers written, {} atlases, {} texels, {:.3} MB baked \
+         (placement estimate {:.3} MB), {:.1} s",
+        rep.impostors,
+        rep.layers_written,
+        rep.layers,
+        rep.atlases,
+        rep.texels,
+        rep.memory_bytes as f64 / 1e6,
+        rep.placement_memory_bytes as f64 / 1e6,
+        start.elapsed().as_secs_f64()
+    );
+    Ok(ExitCode::SUCCESS)
+}

@@ -1,0 +1,166 @@
+//! `impostor evaluate`: the independent check of a placement, written as
+//! JSON; exit 4 when the guarantee is broken.
+
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+use clap::Args;
+use optimizer::api::placement::Placement;
+use optimizer::evaluate::EvalOptions;
+use optimizer::evaluate::images::{ImageOptions, LayerSource};
+use optimizer::input::{GeometryUse, Load, SceneInput, Source};
+use optimizer::{Error, Result};
+
+use crate::output::{write_json, write_output};
+use crate::{read_job, set_threads};
+
+#[derive(Args)]
+pub struct EvaluateArgs {
+    /// Scene: .glb, .gltf or a JSON scene summary.
+    scene: PathBuf,
+    /// Job JSON.
+    #[arg(long)]
+    job: PathBuf,
+    /// Placement JSON written by `place`.
+    #[arg(long)]
+    placement: PathBuf,
+    /// Output evaluation JSON (default: standard output).
+    #[arg(short, long)]
+    out: Option<PathBuf>,
+    /// Number of random views.
+    #[arg(long, default_value_t = 10_000)]
+    views: u64,
+    /// Seed of the view sampler.
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
+    /// Worker threads (default: all cores).
+    #[arg(long)]
+    threads: Option<usize>,
+    /// Also render this many views in CPVs with impostors twice (all
+    /// geometry; geometry with the impostors) and report the image error.
+    #[arg(long, default_value_t = 0)]
+    images: u32,
+    /// Baked impostors (GLB from `bake`) for --images; default: bake in memory.
+    #[arg(long)]
+    impostors: Option<PathBuf>,
+    /// Per-channel colour tolerance (0–255) of the image mismatch test.
+    #[arg(long, default_value_t = 24)]
+    tolerance: u8,
+    /// Write the worst view's renders side by side as a PNG into this directory.
+    #[arg(long)]
+    dump: Option<PathBuf>,
+    /// Precomputed PVS file (for `"visibility": "precomputed"`).
+    #[arg(long)]
+    pvs: Option<PathBuf>,
+    /// Visibility check: rays per view through the image (0: none).
+    #[arg(long, default_value_t = 256)]
+    check_rays: u32,
+    /// Visibility check: culled objects in the view probed per view.
+    #[arg(long, default_value_t = 16)]
+    check_objects: u32,
+}
+
+/// Reads a placement file.
+pub fn read_placement(path: &std::path::Path) -> Result<Placement> {
+    let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+    serde_json::from_slice(&bytes).map_err(|e| {
+        Error::bad(
+            path.display().to_string(),
+            format!("invalid placement JSON: {e}"),
+        )
+    })
+}
+
+pub fn run(a: EvaluateArgs) -> Result<ExitCode> {
+    set_threads(a.threads)?;
+    let job_name = a.job.display().to_string();
+    let job = read_job(&a.job)?;
+    let geometry = if a.images > 0 {
+        GeometryUse::Required
+    } else {
+        GeometryUse::ForChecks
+    };
+    let load =
+        Load::new(Source::File(&a.scene), geometry).with_pvs(a.pvs.as_deref().map(Source::File));
+    let input = SceneInput::load(&load, &job, &job_name)?;
+    let prepared = input.prepare(&job, &job_name)?;
+    let name = a.placement.display().to_string();
+    let p = read_placement(&a.placement)?;
+    let opts = EvalOptions {
+        views: a.views,
+        seed: a.seed,
+        check_rays: a.check_rays,
+        check_objects: a.check_objects,
+    };
+    let mut eval = prepared.evaluate(&p, &opts, &name)?;
+    if let Some(v) = &eval.visibility {
+        eprintln!(
+            "visibility {:?}: {} cells, {:.1} visible objects per view ({:.2} %), \
+             {} missed objects over {} checked views ({} rays)",
+            v.mode,
+            v.cells,
+            v.mean_visible_objects,
+            100.0 * v.mean_visible_fraction,
+            v.missed_objects,
+            v.views_checked,
+            v.rays
+        );
+    }
+    if let Some(x) = &eval.parallax {
+        eprintln!(
+            "parallax of {} impostors: max {:.2} px (impostor {}), mean {:.2} px, \
+             {} over the {} px budget ({} over 1.5 times it)",
+            x.impostors,
+            x.max_px,
+            x.worst_impostor,
+            x.mean_px,
+            x.over_budget,
+            x.max_error_px,
+            x.over_budget_1_5
+        );
+    }
+    if a.images > 0 {
+        let glb = match &a.impostors {
+            Some(path) => Some((
+                std::fs::read(path).map_err(|e| Error::io(path, e))?,
+                path.display().to_string(),
+            )),
+            None => None,
+        };
+        let layers = match &glb {
+            Some((bytes, name)) => LayerSource::Glb { bytes, name },
+            None => LayerSource::Bake,
+        };
+        let opts = ImageOptions {
+            views: a.images,
+            seed: a.seed,
+            tolerance: a.tolerance,
+        };
+        let (report, pair) = prepared.image_error(&p, layers, &opts, &name)?;
+        eprintln!(
+            "{} image views: PSNR mean {:.2} dB (min {:.2}), mismatch mean {:.4} (max {:.4})",
+            report.views,
+            report.psnr_db.mean,
+            report.psnr_db.min,
+            report.mismatch_fraction.mean,
+            report.mismatch_fraction.max
+        );
+        if let (Some(dir), Some(pair)) = (&a.dump, pair) {
+            std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
+            write_output(Some(&dir.join("worst_view.png")), &pair.side_by_side_png()?)?;
+        }
+        eval.image = Some(report);
+    }
+    write_json(a.out.as_deref(), &eval)?;
+    eprintln!(
+        "{} views: max {:.3} ms, p99 {:.3} ms, {} violations ({} in solved)",
+        eval.views, eval.max_ms, eval.p99_ms, eval.violations, eval.violations_in_solved
+    );
+    Ok(
+        if eval.violations_in_solved > 0 || eval.impostors_outside_view_cell > 0 {
+            ExitCode::from(4)
+        } else {
+            ExitCode::SUCCESS
+        },
+    )
+}

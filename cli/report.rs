@@ -1,0 +1,116 @@
+//! `impostor report`: every method × knob value placed and evaluated, as
+//! HTML, JSON and CSV; exit 4 when some run broke the guarantee.
+
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+use clap::Args;
+use optimizer::api::job::{Job, Method};
+use optimizer::control::Control;
+use optimizer::input::{GeometryUse, Load, SceneInput, Source};
+use optimizer::report::{self, RunStatus};
+use optimizer::{Error, Result};
+
+use crate::output::{write_json, write_output};
+use crate::progress::Progress;
+use crate::{MethodArg, set_threads};
+
+#[derive(Args)]
+pub struct ReportArgs {
+    /// Scene: .glb, .gltf or a JSON scene summary.
+    scene: PathBuf,
+    /// The base job JSON.
+    #[arg(long)]
+    job: PathBuf,
+    /// Methods to compare, comma-separated (default: all).
+    #[arg(long, value_delimiter = ',')]
+    methods: Vec<MethodArg>,
+    /// A knob and its values, e.g. `target_frame_time_ms=10,15,20` or
+    /// `problem_views.cell_size=46,23,11.5` (repeatable).
+    #[arg(long)]
+    sweep: Vec<String>,
+    /// Also perturb the target (±1 %, ±5 %), shift the grid by half a cell
+    /// and shuffle the objects, and report each method's spread.
+    #[arg(long)]
+    stability: bool,
+    /// Views per evaluation.
+    #[arg(long, default_value_t = 4000)]
+    views: u64,
+    /// Precomputed PVS file (for `"visibility": "precomputed"`).
+    #[arg(long)]
+    pvs: Option<PathBuf>,
+    /// Worker threads (default: all cores).
+    #[arg(long)]
+    threads: Option<usize>,
+    /// Output directory.
+    #[arg(short, long)]
+    out: PathBuf,
+}
+
+pub fn run(a: ReportArgs) -> Result<ExitCode> {
+    set_threads(a.threads)?;
+    let job_name = a.job.display().to_string();
+    let text = std::fs::read(&a.job).map_err(|e| Error::io(&a.job, e))?;
+    let parsed = Job::from_json(&text, &job_name)?;
+    let job_value: serde_json::Value = serde_json::from_slice(&text)
+        .map_err(|e| Error::bad(&job_name, format!("invalid job JSON: {e}")))?;
+    let methods = if a.methods.is_empty() {
+        Method::ALL.to_vec()
+    } else {
+        a.methods.iter().map(|m| m.0).collect()
+    };
+    let sweeps = a
+        .sweep
+        .iter()
+        .map(|s| report::run::parse_sweep(s))
+        .collect::<Result<Vec<_>>>()?;
+    let load = Load::new(Source::File(&a.scene), GeometryUse::WhenNeeded)
+        .with_pvs(a.pvs.as_deref().map(Source::File));
+    let input = SceneInput::load(&load, &parsed, &job_name)?;
+    std::fs::create_dir_all(&a.out).map_err(|e| Error::io(&a.out, e))?;
+    let name = a
+        .scene
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_default();
+    let progress = Progress::bar("runs");
+    let observer = |e: optimizer::control::Event<'_>| progress.event(e);
+    let r = report::run::run(
+        &name,
+        &input,
+        &job_value,
+        &report::run::ReportOptions {
+            methods,
+            sweeps,
+            stability: a.stability,
+            views: a.views,
+        },
+        &Control::observed(&observer),
+    )?;
+    drop(progress);
+    write_json(Some(&a.out.join("report.json")), &r)?;
+    write_output(
+        Some(&a.out.join("report.html")),
+        report::render::render_html(&r).as_bytes(),
+    )?;
+    for (file, text) in report::render::csv_files(&r) {
+        write_output(Some(&a.out.join(file)), text.as_bytes())?;
+    }
+    let failed = r.runs.iter().filter(|x| x.status != RunStatus::Ok).count();
+    let broken = r
+        .runs
+        .iter()
+        .filter(|x| x.eval.as_ref().is_some_and(|e| e.violations_in_solved > 0))
+        .count();
+    eprintln!(
+        "{} runs ({failed} failed, {broken} with a broken guarantee), {} walkthroughs: {}",
+        r.runs.len(),
+        r.walkthroughs.len(),
+        a.out.join("report.html").display()
+    );
+    Ok(if broken > 0 {
+        ExitCode::from(4)
+    } else {
+        ExitCode::SUCCESS
+    })
+}

@@ -1,0 +1,210 @@
+//! The placement under evaluation, checked against its scene and job and
+//! indexed by (grid cell, view direction).
+
+use std::collections::HashMap;
+
+use glam::DVec3;
+
+use crate::api::job::Job;
+use crate::api::placement::{Placement, ViewCellJson};
+use crate::error::{Error, Result};
+use crate::math::geom::{Aabb, Sphere, Vdi, face_direction};
+use crate::math::grid::Grid;
+use crate::model::impostor::ViewCell;
+use crate::scene::Scene;
+use crate::views::leaf_level;
+
+pub(super) struct IndexedImpostor {
+    pub(super) sphere: Sphere,
+    pub(super) layers: u32,
+    pub(super) cell: ViewCell,
+}
+
+/// A placement checked against its scene and job, with the lookups a
+/// view needs: its problem view, and that view's impostors and the objects
+/// they replace.
+pub(super) struct PlacementIndex {
+    pub(super) impostors: Vec<IndexedImpostor>,
+    /// Per CPV: sorted represented object ids and the impostor ids.
+    cpv_replaced: Vec<Vec<u32>>,
+    cpv_impostors: Vec<Vec<u32>>,
+    /// Per CPV: solved (its final time within the target).
+    pub(super) cpv_solved: Vec<bool>,
+    lookup: HashMap<(u32, Vdi), u32>,
+    /// The job's grid.
+    pub(super) grid: Grid,
+    level: u8,
+}
+
+impl PlacementIndex {
+    /// Checks that the placement refers to the scene and the job (`source`
+    /// names it in errors) and builds the lookups.
+    pub(super) fn new(
+        scene: &Scene,
+        job: &Job,
+        placement: &Placement,
+        source: &str,
+    ) -> Result<PlacementIndex> {
+        let n_obj = scene.objects.len() as u32;
+        let mut impostors = Vec::with_capacity(placement.impostors.len());
+        for (k, imp) in placement.impostors.iter().enumerate() {
+            let what = format!("{source}: impostors[{k}]");
+            if imp.id as usize != k {
+                return Err(Error::bad(what, format!("id {} is not its index", imp.id)));
+            }
+            let center = DVec3::from_array(imp.sphere.center);
+            let sphere = Sphere {
+                center,
+                radius: imp.sphere.radius,
+            };
+            if !(center.is_finite() && sphere.radius.is_finite() && sphere.radius >= 0.0) {
+                return Err(Error::bad(what, "sphere is not finite"));
+            }
+            if imp.objects.is_empty() {
+                return Err(Error::bad(what, "represents no objects"));
+            }
+            for &o in &imp.objects {
+                if o >= n_obj {
+                    return Err(Error::bad(
+                        format!("{what}.objects"),
+                        format!(
+                            "object id {o} does not exist in the scene ({n_obj} objects): the placement does not match the scene"
+                        ),
+                    ));
+                }
+                let ob = &scene.objects[o as usize];
+                if center.distance(ob.center()) + ob.radius() > sphere.radius * (1.0 + 1e-9) + 1e-6
+                {
+                    return Err(Error::bad(
+                        format!("{what}.sphere"),
+                        format!(
+                            "does not contain object {o}: the placement does not match the scene"
+                        ),
+                    ));
+                }
+            }
+            if imp.layers == 0 || imp.resolution == 0 {
+                return Err(Error::bad(
+                    what,
+                    format!(
+                        "layers ({}) and resolution ({}) must be positive",
+                        imp.layers, imp.resolution
+                    ),
+                ));
+            }
+            if let Err((field, problem)) = imp.check_view_cell() {
+                return Err(Error::bad(format!("{what}.{field}"), problem));
+            }
+            let cell = match imp.view_cell {
+                ViewCellJson::Shaft {
+                    apex,
+                    axis,
+                    half_angle_deg,
+                    min_distance,
+                } => ViewCell::Shaft {
+                    apex: DVec3::from_array(apex),
+                    axis: DVec3::from_array(axis).normalize_or_zero(),
+                    half_angle: half_angle_deg.to_radians(),
+                    min_distance,
+                },
+                ViewCellJson::Box { min, max } => {
+                    ViewCell::Box(Aabb::new(DVec3::from_array(min), DVec3::from_array(max)))
+                }
+            };
+            impostors.push(IndexedImpostor {
+                sphere,
+                layers: imp.layers,
+                cell,
+            });
+        }
+        let grid = job.grid();
+        let level = leaf_level(job.problem_views.min_vdi_deg);
+        let mut lookup = HashMap::with_capacity(placement.cpvs.len());
+        let mut cpv_replaced = Vec::with_capacity(placement.cpvs.len());
+        let mut cpv_impostors = Vec::with_capacity(placement.cpvs.len());
+        let mut cpv_solved = Vec::with_capacity(placement.cpvs.len());
+        for (k, c) in placement.cpvs.iter().enumerate() {
+            let what = format!("{source}: cpvs[{k}]");
+            let region = Aabb::new(
+                DVec3::from_array(c.region.min),
+                DVec3::from_array(c.region.max),
+            );
+            let cell = grid
+                .cell_of(region.center())
+                .ok_or_else(|| Error::bad(&what, "region lies outside the job's view space"))?;
+            let expect = grid.cell_box(cell, cell.map(|i| i + 1));
+            if expect.min.distance(region.min) + expect.max.distance(region.max)
+                > 1e-6 * (1.0 + expect.half_diagonal())
+            {
+                return Err(Error::bad(
+                    &what,
+                    "region is not a cell of the job's view space grid: the placement does not match the job",
+                ));
+            }
+            let d = &c.directions;
+            if d.face > 5 {
+                return Err(Error::bad(
+                    format!("{what}.directions.face"),
+                    format!("{} is not in 0..6", d.face),
+                ));
+            }
+            let mid = |[a, b]: [f64; 2]| ((a.atan() + b.atan()) * 0.5).tan();
+            let vdi = Vdi::containing(face_direction(d.face, mid(d.u), mid(d.v)), level);
+            if (vdi.u_range()[0] - d.u[0]).abs() > 1e-9 || (vdi.v_range()[1] - d.v[1]).abs() > 1e-9
+            {
+                return Err(Error::bad(
+                    format!("{what}.directions"),
+                    "is not a minimum-size VDI of the job: the placement does not match the job",
+                ));
+            }
+            if lookup.insert((grid.linear(cell), vdi), k as u32).is_some() {
+                return Err(Error::bad(&what, "duplicate CPV"));
+            }
+            let mut replaced = Vec::new();
+            for &i in &c.impostors {
+                let imp = placement.impostors.get(i as usize).ok_or_else(|| {
+                    Error::bad(
+                        format!("{what}.impostors"),
+                        format!("impostor {i} does not exist"),
+                    )
+                })?;
+                replaced.extend_from_slice(&imp.objects);
+            }
+            replaced.sort_unstable();
+            let before = replaced.len();
+            replaced.dedup();
+            if replaced.len() != before {
+                return Err(Error::bad(
+                    format!("{what}.impostors"),
+                    "two impostors represent the same object",
+                ));
+            }
+            cpv_replaced.push(replaced);
+            cpv_impostors.push(c.impostors.clone());
+            cpv_solved.push(c.time_ms_final <= job.target_frame_time_ms && c.solved);
+        }
+        Ok(PlacementIndex {
+            impostors,
+            cpv_replaced,
+            cpv_impostors,
+            cpv_solved,
+            lookup,
+            grid,
+            level,
+        })
+    }
+
+    /// The CPV of a view (its cell and direction), with the objects its
+    /// impostors replace and the impostors; empty lists outside CPVs.
+    pub(super) fn view_cpv(&self, cell: [u32; 3], dir: DVec3) -> (Option<u32>, &[u32], &[u32]) {
+        let vdi = Vdi::containing(dir, self.level);
+        match self.lookup.get(&(self.grid.linear(cell), vdi)).copied() {
+            Some(c) => (
+                Some(c),
+                &self.cpv_replaced[c as usize],
+                &self.cpv_impostors[c as usize],
+            ),
+            None => (None, &[], &[]),
+        }
+    }
+}

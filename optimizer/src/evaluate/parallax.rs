@@ -1,0 +1,45 @@
+//! The image criterion checked geometrically for every impostor.
+
+use rayon::prelude::*;
+
+use crate::api::evaluation::ParallaxCheck;
+use crate::api::job::Job;
+use crate::api::placement::Placement;
+use crate::math::rng::Rng;
+
+/// Sphere points and viewpoints per impostor of the parallax check.
+const PARALLAX_SAMPLES: u32 = 32;
+
+/// Checks the parallax of every impostor of `placement` (deterministic:
+/// each impostor's samples are seeded by `seed` and its id).
+pub fn parallax_check(job: &Job, placement: &Placement, seed: u64) -> Option<ParallaxCheck> {
+    if placement.impostors.is_empty() {
+        return None;
+    }
+    let theta = job.pixel_angle();
+    let errs: Vec<f64> = placement
+        .impostors
+        .par_iter()
+        .map(|imp| {
+            let mut rng = Rng::new(seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) ^ u64::from(imp.id));
+            crate::bake::parallax(imp, &mut rng, PARALLAX_SAMPLES, PARALLAX_SAMPLES) / theta
+        })
+        .collect();
+    let budget = job.max_error_px;
+    let (worst, max_px) =
+        errs.iter().enumerate().fold(
+            (0, 0.0f64),
+            |(wi, wm), (i, &e)| if e > wm { (i, e) } else { (wi, wm) },
+        );
+    Some(ParallaxCheck {
+        max_error_px: budget,
+        impostors: errs.len() as u64,
+        points: PARALLAX_SAMPLES,
+        viewpoints: PARALLAX_SAMPLES,
+        max_px,
+        mean_px: errs.iter().sum::<f64>() / errs.len() as f64,
+        over_budget: errs.iter().filter(|&&e| e > budget).count() as u64,
+        over_budget_1_5: errs.iter().filter(|&&e| e > 1.5 * budget).count() as u64,
+        worst_impostor: placement.impostors[worst].id,
+    })
+}

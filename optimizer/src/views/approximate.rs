@@ -1,0 +1,209 @@
+//! The approximation itself: the kd tree over the grid, the direction
+//! quadtrees per region, and the recursion that keeps problem views.
+
+use crate::api::job::Job;
+use crate::math::geom::{Vdi, enclosing_cone};
+use crate::math::grid::Grid;
+use crate::views::context::{Context, Counters};
+use crate::views::costs::{RegionCosts, enclosed_cost};
+use crate::views::{Cpv, KdNode, ProblemViews, leaf_level};
+
+/// Builds the kd tree over the grid (pre-order).
+fn build_kd(grid: &Grid) -> Vec<KdNode> {
+    let mut kd = Vec::new();
+    let mut stack = vec![([0u32; 3], grid.counts, u32::MAX)];
+    while let Some((lo, hi, parent)) = stack.pop() {
+        let id = kd.len() as u32;
+        if parent != u32::MAX {
+            let p: &mut KdNode = &mut kd[parent as usize];
+            match &mut p.children {
+                None => p.children = Some([id, u32::MAX]),
+                Some(c) => c[1] = id,
+            }
+        }
+        let sizes = [0, 1, 2].map(|a| hi[a] - lo[a]);
+        let axis = if sizes[0] >= sizes[1] && sizes[0] >= sizes[2] {
+            0
+        } else if sizes[1] >= sizes[2] {
+            1
+        } else {
+            2
+        };
+        if sizes[axis] > 1 {
+            let mid = lo[axis] + sizes[axis] / 2;
+            let (mut hi_l, mut lo_r) = (hi, lo);
+            hi_l[axis] = mid;
+            lo_r[axis] = mid;
+            stack.push((lo_r, hi, id));
+            stack.push((lo, hi_l, id));
+        }
+        kd.push(KdNode {
+            lo,
+            hi,
+            aabb: grid.cell_box(lo, hi),
+            children: None,
+            parent,
+        });
+    }
+    kd
+}
+
+/// Sorted list of every quadtree ancestor (including itself) of the given
+/// leaves, for "does this VDI contain a parent problem" queries.
+fn ancestors(leaves: &[Vdi]) -> Vec<Vdi> {
+    let mut out = Vec::with_capacity(leaves.len() * 4);
+    for l in leaves {
+        for up in 0..=l.level {
+            out.push(Vdi {
+                face: l.face,
+                level: l.level - up,
+                iu: l.iu >> up,
+                iv: l.iv >> up,
+            });
+        }
+    }
+    out.sort_unstable();
+    out.dedup();
+    out
+}
+
+struct RegionResult {
+    cpvs: Vec<Cpv>,
+    cones: u64,
+    regions: u64,
+}
+
+fn process(
+    ctx: &Context,
+    counters: &Counters,
+    kd: &[KdNode],
+    id: u32,
+    parent_problems: &[Vdi],
+    leaf_level: u8,
+) -> RegionResult {
+    let node = &kd[id as usize];
+    if counters.over_budget() || ctx.cancelled() {
+        return RegionResult {
+            cpvs: Vec::new(),
+            cones: 0,
+            regions: 0,
+        };
+    }
+    let region = node.aabb;
+    let visible = ctx.visibility.and_then(|v| v.region(node.lo, node.hi));
+    let costs = RegionCosts::new(ctx, &region, visible.as_deref(), counters);
+    let open = ancestors(parent_problems);
+    let mut problems: Vec<(Vdi, f64)> = Vec::new();
+    let mut cones = 0u64;
+    let mut stack: Vec<Vdi> = (0..6u8).rev().map(Vdi::face).collect();
+    while let Some(vdi) = stack.pop() {
+        if open.binary_search(&vdi).is_err() || !ctx.pitch_overlaps(&vdi) {
+            continue;
+        }
+        let cone = enclosing_cone(&region, &vdi, ctx.half_diagonal);
+        cones += 1;
+        let t = ctx
+            .model
+            .frame_time(enclosed_cost(ctx, &costs, &cone, &region, None));
+        if t <= ctx.t_max {
+            continue;
+        }
+        if vdi.level == leaf_level {
+            problems.push((vdi, t));
+        } else {
+            stack.extend(vdi.children().into_iter().rev());
+        }
+    }
+    if problems.is_empty() {
+        return RegionResult {
+            cpvs: Vec::new(),
+            cones,
+            regions: 1,
+        };
+    }
+    match node.children {
+        None => {
+            let cpvs = problems
+                .into_iter()
+                .map(|(vdi, _)| {
+                    let cone = enclosing_cone(&region, &vdi, ctx.half_diagonal);
+                    let mut nodes = Vec::new();
+                    let cost = enclosed_cost(ctx, &costs, &cone, &region, Some(&mut nodes));
+                    let t = ctx.model.frame_time(cost);
+                    let h = ctx.hierarchy;
+                    // Keep the clusters some impostor could accelerate: an
+                    // impostor has at least one layer.
+                    nodes.retain(|&(n, orig)| {
+                        let s = h.nodes[n as usize].sphere;
+                        let imp =
+                            ctx.model
+                                .impostor(1, s.radius, region.distance_to_point(s.center));
+                        ctx.model.frame_time(cost - orig + imp) < t
+                    });
+                    nodes.sort_unstable_by_key(|&(n, _)| n);
+                    Cpv {
+                        kd: id,
+                        region,
+                        vdi,
+                        cost,
+                        time: t,
+                        node_ids: nodes.iter().map(|&(n, _)| n).collect(),
+                        node_costs: nodes.iter().map(|&(_, c)| c).collect(),
+                    }
+                })
+                .collect::<Vec<Cpv>>();
+            let pairs: usize = cpvs.iter().map(|c| c.node_ids.len()).sum();
+            counters.add_pairs(pairs as u64);
+            RegionResult {
+                cpvs,
+                cones,
+                regions: 1,
+            }
+        }
+        Some([l, r]) => {
+            drop(costs);
+            let leaves: Vec<Vdi> = problems.into_iter().map(|(v, _)| v).collect();
+            let (mut a, b) = rayon::join(
+                || process(ctx, counters, kd, l, &leaves, leaf_level),
+                || process(ctx, counters, kd, r, &leaves, leaf_level),
+            );
+            a.cpvs.extend(b.cpvs);
+            RegionResult {
+                cpvs: a.cpvs,
+                cones: cones + a.cones + b.cones,
+                regions: 1 + a.regions + b.regions,
+            }
+        }
+    }
+}
+
+/// Approximates the problem view space of `job`, counting its work in
+/// `counters`; stops early (with what it found so far) once the counters
+/// are over their pair budget or the run is cancelled.
+pub fn approximate(ctx: &Context, job: &Job, counters: &Counters) -> ProblemViews {
+    let grid = job.grid();
+    let kd = build_kd(&grid);
+    let level = leaf_level(job.problem_views.min_vdi_deg);
+    let n = 1u32 << level;
+    let all: Vec<Vdi> = (0..6u8)
+        .flat_map(|face| {
+            (0..n).flat_map(move |iv| {
+                (0..n).map(move |iu| Vdi {
+                    face,
+                    level,
+                    iu,
+                    iv,
+                })
+            })
+        })
+        .collect();
+    let res = process(ctx, counters, &kd, 0, &all, level);
+    ProblemViews {
+        grid,
+        kd,
+        cpvs: res.cpvs,
+        leaf_level: level,
+        cone_evaluations: res.cones,
+        regions_visited: res.regions,
+    }
+}

@@ -1,0 +1,147 @@
+//! What the per-region work of the approximation, the candidate generation
+//! and the greedy share: the scene, its hierarchy and visibility, the cost
+//! model and the job's limits ([`Context`], read-only), and the work
+//! counters with the pair budget that stops a run too large for memory
+//! ([`Counters`]).
+
+use std::sync::atomic::{AtomicU64, Ordering};
+
+use crate::api::job::Job;
+use crate::api::stats::{LodReport, LodStats};
+use crate::control::Control;
+use crate::math::geom::{Vdi, frustum_half_diagonal};
+use crate::model::cost::CostModel;
+use crate::scene::hierarchy::Hierarchy;
+use crate::scene::{MAX_LODS, Scene};
+use crate::visibility::Visibility;
+
+/// Everything the per-region work needs, shared read-only across threads.
+pub struct Context<'a> {
+    /// The scene.
+    pub scene: &'a Scene,
+    /// The object hierarchy.
+    pub hierarchy: &'a Hierarchy,
+    /// From-region visibility: regions count only their potentially
+    /// visible objects (`None`: every object).
+    pub visibility: Option<&'a Visibility<'a>>,
+    /// The cost model.
+    pub model: CostModel,
+    /// `t_max`, ms.
+    pub t_max: f64,
+    /// Frustum diagonal half-angle, radians.
+    pub half_diagonal: f64,
+    /// Pitch range, radians.
+    pub pitch: [f64; 2],
+    /// Cancellation (checked per kd region and per cluster) and progress.
+    pub control: Control<'a>,
+}
+
+impl<'a> Context<'a> {
+    /// The context of `job` over a scene, its hierarchy and visibility.
+    pub fn new(
+        scene: &'a Scene,
+        hierarchy: &'a Hierarchy,
+        visibility: Option<&'a Visibility<'a>>,
+        job: &Job,
+        control: Control<'a>,
+    ) -> Self {
+        let [w, h] = job.camera.resolution;
+        Context {
+            scene,
+            hierarchy,
+            visibility,
+            model: CostModel::new(job),
+            t_max: job.target_frame_time_ms,
+            half_diagonal: frustum_half_diagonal(job.camera.fov_deg, f64::from(w) / f64::from(h)),
+            pitch: job.view_space.pitch_deg.map(f64::to_radians),
+            control,
+        }
+    }
+
+    /// True once the run was cancelled.
+    pub fn cancelled(&self) -> bool {
+        self.control.cancelled()
+    }
+
+    /// True when some direction of `vdi` lies in the pitch range.
+    pub fn pitch_overlaps(&self, vdi: &Vdi) -> bool {
+        let [lo, hi] = vdi.elevation_range();
+        hi >= self.pitch[0] - 1e-12 && lo <= self.pitch[1] + 1e-12
+    }
+}
+
+/// The default budget of (CPV, cluster) pairs. Every pair costs about 50
+/// bytes through candidate generation and the greedy, so 300 M pairs need
+/// about 15 GB; a job beyond it is refused instead of exhausting memory.
+pub const MAX_PAIRS: u64 = 300_000_000;
+
+/// Bytes held per (CPV, cluster) pair from the approximation to the greedy.
+pub const BYTES_PER_PAIR: u64 = 49;
+
+/// Work counters of one run, safe to update from any thread.
+pub struct Counters {
+    /// (CPV, cluster) pairs recorded so far.
+    pairs: AtomicU64,
+    /// The most pairs the run may hold; the approximation stops early
+    /// once `pairs` exceeds it.
+    pair_budget: u64,
+    /// Per level of detail, how often it was chosen for a (region, object)
+    /// pair; the last slot counts objects too small to be drawn.
+    lod_levels: Vec<AtomicU64>,
+}
+
+impl Counters {
+    /// Zero counters with a budget of `pair_budget` (CPV, cluster) pairs.
+    pub fn new(pair_budget: u64) -> Self {
+        Counters {
+            pairs: AtomicU64::new(0),
+            pair_budget,
+            lod_levels: (0..=MAX_LODS).map(|_| AtomicU64::new(0)).collect(),
+        }
+    }
+
+    /// The pair budget.
+    pub fn pair_budget(&self) -> u64 {
+        self.pair_budget
+    }
+
+    /// Records `n` more (CPV, cluster) pairs.
+    pub fn add_pairs(&self, n: u64) {
+        self.pairs.fetch_add(n, Ordering::Relaxed);
+    }
+
+    /// True once the recorded pairs exceed the budget.
+    pub fn over_budget(&self) -> bool {
+        self.pairs.load(Ordering::Relaxed) > self.pair_budget
+    }
+
+    /// Counts one choice of level `slot` ([`MAX_LODS`]: not drawn).
+    pub fn count_lod(&self, slot: usize) {
+        self.lod_levels[slot].fetch_add(1, Ordering::Relaxed);
+    }
+
+    /// Level-of-detail counters of `scene` (`None` when no object has
+    /// levels and none were generated).
+    pub fn lod_stats(&self, scene: &Scene, generated: Option<LodReport>) -> Option<LodStats> {
+        let with = scene.objects.iter().filter(|o| !o.lods.is_empty()).count();
+        if with == 0 && generated.is_none() {
+            return None;
+        }
+        let levels = scene
+            .objects
+            .iter()
+            .map(|o| o.lods.len())
+            .max()
+            .unwrap_or(0);
+        let mut chosen: Vec<u64> = self.lod_levels[..levels]
+            .iter()
+            .map(|a| a.load(Ordering::Relaxed))
+            .collect();
+        chosen.push(self.lod_levels[MAX_LODS].load(Ordering::Relaxed));
+        Some(LodStats {
+            objects_with_lods: with as u64,
+            chosen_levels: chosen,
+            generated,
+        })
+    }
+}

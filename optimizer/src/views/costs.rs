@@ -1,0 +1,138 @@
+//! The cost of what an enclosing frustum sees from a region: per-region
+//! object and cluster costs ([`RegionCosts`]) and the one walk that sums
+//! them inside a cone ([`enclosed_cost`]).
+
+use crate::math::geom::{Aabb, Cone, Vdi, enclosing_cone};
+use crate::model::cost::Cost;
+use crate::views::context::{Context, Counters, MAX_PAIRS};
+use crate::visibility::ObjectSet;
+
+/// Per-region costs: every object's cost seen from the region's closest point
+/// and every cluster's sum. Objects outside the region's potentially visible
+/// set cost nothing.
+pub struct RegionCosts {
+    /// Per object id.
+    pub objects: Vec<Cost>,
+    /// Per node id.
+    pub nodes: Vec<Cost>,
+}
+
+impl RegionCosts {
+    /// Costs for `region`, counting only the objects of `visible` (all when
+    /// `None`).
+    /// The level of detail chosen for each object is counted in `counters`.
+    pub fn new(
+        ctx: &Context,
+        region: &Aabb,
+        visible: Option<&ObjectSet>,
+        counters: &Counters,
+    ) -> RegionCosts {
+        let objects: Vec<Cost> = ctx
+            .scene
+            .objects
+            .iter()
+            .zip(&ctx.hierarchy.object_spheres)
+            .enumerate()
+            .map(|(id, (o, s))| {
+                if visible.is_some_and(|v| !v.contains(id as u32)) {
+                    return Cost::default();
+                }
+                let d = region.distance_to_point(s.center);
+                if !o.lods.is_empty() {
+                    let slot = ctx
+                        .model
+                        .lod_level(o, s.radius, d)
+                        .unwrap_or(crate::scene::MAX_LODS);
+                    counters.count_lod(slot);
+                }
+                ctx.model.object_region(o, s.radius, d)
+            })
+            .collect();
+        let h = ctx.hierarchy;
+        let mut nodes = vec![Cost::default(); h.nodes.len()];
+        for id in (0..h.nodes.len()).rev() {
+            nodes[id] = match h.nodes[id].children {
+                None => h
+                    .objects(id as u32)
+                    .iter()
+                    .fold(Cost::default(), |acc, &o| acc + objects[o as usize]),
+                Some([l, r]) => nodes[l as usize] + nodes[r as usize],
+            };
+        }
+        RegionCosts { objects, nodes }
+    }
+}
+
+/// Cost of all objects whose bounding sphere meets `cone`. When `emit` is
+/// given, also lists every cluster meeting the cone whose sphere does not meet
+/// `region`, with the cost of its objects inside the cone.
+pub fn enclosed_cost(
+    ctx: &Context,
+    costs: &RegionCosts,
+    cone: &Cone,
+    region: &Aabb,
+    mut emit: Option<&mut Vec<(u32, Cost)>>,
+) -> Cost {
+    fn visit(
+        ctx: &Context,
+        costs: &RegionCosts,
+        cone: &Cone,
+        region: &Aabb,
+        n: u32,
+        emit: &mut Option<&mut Vec<(u32, Cost)>>,
+    ) -> Cost {
+        let h = ctx.hierarchy;
+        let node = &h.nodes[n as usize];
+        let s = node.sphere;
+        if !cone.intersects_sphere(s.center, s.radius) {
+            return Cost::default();
+        }
+        let replaceable = |m: u32| {
+            let s = h.nodes[m as usize].sphere;
+            !region.intersects_sphere(s.center, s.radius)
+        };
+        if cone.contains_sphere(s.center, s.radius) {
+            if let Some(out) = emit.as_deref_mut() {
+                for m in n..node.subtree_end {
+                    let c = costs.nodes[m as usize];
+                    if (c.cpu > 0.0 || c.gpu > 0.0) && replaceable(m) {
+                        out.push((m, costs.nodes[m as usize]));
+                    }
+                }
+            }
+            return costs.nodes[n as usize];
+        }
+        let c = match node.children {
+            None => {
+                let mut c = Cost::default();
+                for &o in h.objects(n) {
+                    let os = &h.object_spheres[o as usize];
+                    if cone.intersects_sphere(os.center, os.radius) {
+                        c += costs.objects[o as usize];
+                    }
+                }
+                c
+            }
+            Some([l, r]) => {
+                visit(ctx, costs, cone, region, l, emit) + visit(ctx, costs, cone, region, r, emit)
+            }
+        };
+        if let Some(out) = emit.as_deref_mut()
+            && (c.cpu > 0.0 || c.gpu > 0.0)
+            && replaceable(n)
+        {
+            out.push((n, c));
+        }
+        c
+    }
+    visit(ctx, costs, cone, region, 0, &mut emit)
+}
+
+/// Estimated frame time of views in `region` with directions in `vdi`, using
+/// the enclosing frustum and every object (for tests and baselines).
+pub fn enclosing_time(ctx: &Context, region: &Aabb, vdi: &Vdi) -> f64 {
+    let costs = RegionCosts::new(ctx, region, None, &Counters::new(MAX_PAIRS));
+    let cone = enclosing_cone(region, vdi, ctx.half_diagonal);
+    ctx.model
+        .frame_time(enclosed_cost(ctx, &costs, &cone, region, None))
+}
