@@ -6,7 +6,7 @@ use std::collections::HashMap;
 use glam::DVec3;
 
 use crate::api::job::Job;
-use crate::api::placement::{Placement, ViewCellJson};
+use crate::api::placement::Placement;
 use crate::error::{Error, Result};
 use crate::math::geom::{Aabb, Sphere, Vdi, face_direction};
 use crate::math::grid::Grid;
@@ -45,72 +45,14 @@ impl PlacementIndex {
         placement: &Placement,
         source: &str,
     ) -> Result<PlacementIndex> {
-        let n_obj = scene.objects.len() as u32;
+        placement.validate(scene, source)?;
         let mut impostors = Vec::with_capacity(placement.impostors.len());
-        for (k, imp) in placement.impostors.iter().enumerate() {
-            let what = format!("{source}: impostors[{k}]");
-            if imp.id as usize != k {
-                return Err(Error::bad(what, format!("id {} is not its index", imp.id)));
-            }
-            let center = DVec3::from_array(imp.sphere.center);
+        for imp in &placement.impostors {
             let sphere = Sphere {
-                center,
+                center: DVec3::from_array(imp.sphere.center),
                 radius: imp.sphere.radius,
             };
-            if !(center.is_finite() && sphere.radius.is_finite() && sphere.radius >= 0.0) {
-                return Err(Error::bad(what, "sphere is not finite"));
-            }
-            if imp.objects.is_empty() {
-                return Err(Error::bad(what, "represents no objects"));
-            }
-            for &o in &imp.objects {
-                if o >= n_obj {
-                    return Err(Error::bad(
-                        format!("{what}.objects"),
-                        format!(
-                            "object id {o} does not exist in the scene ({n_obj} objects): the placement does not match the scene"
-                        ),
-                    ));
-                }
-                let ob = &scene.objects[o as usize];
-                if center.distance(ob.center()) + ob.radius() > sphere.radius * (1.0 + 1e-9) + 1e-6
-                {
-                    return Err(Error::bad(
-                        format!("{what}.sphere"),
-                        format!(
-                            "does not contain object {o}: the placement does not match the scene"
-                        ),
-                    ));
-                }
-            }
-            if imp.layers == 0 || imp.resolution == 0 {
-                return Err(Error::bad(
-                    what,
-                    format!(
-                        "layers ({}) and resolution ({}) must be positive",
-                        imp.layers, imp.resolution
-                    ),
-                ));
-            }
-            if let Err((field, problem)) = imp.check_view_cell() {
-                return Err(Error::bad(format!("{what}.{field}"), problem));
-            }
-            let cell = match imp.view_cell {
-                ViewCellJson::Shaft {
-                    apex,
-                    axis,
-                    half_angle_deg,
-                    min_distance,
-                } => ViewCell::Shaft {
-                    apex: DVec3::from_array(apex),
-                    axis: DVec3::from_array(axis).normalize_or_zero(),
-                    half_angle: half_angle_deg.to_radians(),
-                    min_distance,
-                },
-                ViewCellJson::Box { min, max } => {
-                    ViewCell::Box(Aabb::new(DVec3::from_array(min), DVec3::from_array(max)))
-                }
-            };
+            let cell = ViewCell::from(&imp.view_cell);
             impostors.push(IndexedImpostor {
                 sphere,
                 layers: imp.layers,
@@ -160,25 +102,12 @@ impl PlacementIndex {
             if lookup.insert((grid.linear(cell), vdi), k as u32).is_some() {
                 return Err(Error::bad(&what, "duplicate CPV"));
             }
-            let mut replaced = Vec::new();
-            for &i in &c.impostors {
-                let imp = placement.impostors.get(i as usize).ok_or_else(|| {
-                    Error::bad(
-                        format!("{what}.impostors"),
-                        format!("impostor {i} does not exist"),
-                    )
-                })?;
-                replaced.extend_from_slice(&imp.objects);
-            }
+            let mut replaced: Vec<u32> = c
+                .impostors
+                .iter()
+                .flat_map(|&i| placement.impostors[i as usize].objects.iter().copied())
+                .collect();
             replaced.sort_unstable();
-            let before = replaced.len();
-            replaced.dedup();
-            if replaced.len() != before {
-                return Err(Error::bad(
-                    format!("{what}.impostors"),
-                    "two impostors represent the same object",
-                ));
-            }
             cpv_replaced.push(replaced);
             cpv_impostors.push(c.impostors.clone());
             cpv_solved.push(c.time_ms_final <= job.target_frame_time_ms && c.solved);

@@ -21,7 +21,7 @@ use crate::api::job::Job;
 use crate::api::placement::{PlacedImpostor, SphereJson, ViewCellJson};
 use crate::math::geom::{Aabb, Sphere, enclosing_cone, face_coords};
 use crate::model::cost::Cost;
-use crate::model::impostor::ImpostorModel;
+use crate::model::impostor::{ImpostorModel, ViewCell};
 use crate::views::{Context, Counters, ProblemViews, RegionCosts, enclosed_cost};
 use crate::visibility::ObjectSet;
 
@@ -184,10 +184,7 @@ pub fn place(ctx: &Context, job: &Job, pv: &ProblemViews, counters: &Counters) -
                     center: sphere.center.to_array(),
                     radius: sphere.radius,
                 },
-                view_cell: ViewCellJson::Box {
-                    min: m.aabb.min.to_array(),
-                    max: m.aabb.max.to_array(),
-                },
+                view_cell: ViewCellJson::from(&ViewCell::Box(m.aabb)),
                 layers: 1,
                 resolution: *res,
                 memory_bytes: *memory,

@@ -15,6 +15,7 @@
 use glam::DVec3;
 
 use crate::api::job::Job;
+use crate::api::placement::ViewCellJson;
 use crate::math::geom::{Aabb, Cone, Sphere};
 
 /// Most layers an impostor may have; more means the view cell is far too
@@ -92,6 +93,52 @@ impl ViewCell {
         match *self {
             ViewCell::Box(b) => b.distance_to_point(c),
             ViewCell::Shaft { min_distance, .. } => min_distance,
+        }
+    }
+}
+
+impl From<&ViewCell> for ViewCellJson {
+    /// The placement JSON of a view cell (angles in degrees).
+    fn from(cell: &ViewCell) -> ViewCellJson {
+        match *cell {
+            ViewCell::Shaft {
+                apex,
+                axis,
+                half_angle,
+                min_distance,
+            } => ViewCellJson::Shaft {
+                apex: apex.to_array(),
+                axis: axis.to_array(),
+                half_angle_deg: half_angle.to_degrees(),
+                min_distance,
+            },
+            ViewCell::Box(b) => ViewCellJson::Box {
+                min: b.min.to_array(),
+                max: b.max.to_array(),
+            },
+        }
+    }
+}
+
+impl From<&ViewCellJson> for ViewCell {
+    /// The view cell of a placement's JSON (its axis normalised; check it
+    /// first with [`crate::api::placement::PlacedImpostor::check_view_cell`]).
+    fn from(cell: &ViewCellJson) -> ViewCell {
+        match *cell {
+            ViewCellJson::Shaft {
+                apex,
+                axis,
+                half_angle_deg,
+                min_distance,
+            } => ViewCell::Shaft {
+                apex: DVec3::from_array(apex),
+                axis: DVec3::from_array(axis).normalize_or_zero(),
+                half_angle: half_angle_deg.to_radians(),
+                min_distance,
+            },
+            ViewCellJson::Box { min, max } => {
+                ViewCell::Box(Aabb::new(DVec3::from_array(min), DVec3::from_array(max)))
+            }
         }
     }
 }

@@ -4,3 +4,4 @@
 
 pub mod cost;
 pub mod impostor;
+pub mod validate;

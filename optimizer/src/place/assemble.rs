@@ -9,7 +9,6 @@ use crate::api::placement::{
 use crate::candidates::Candidates;
 use crate::greedy::Selection;
 use crate::model::cost::Cost;
-use crate::model::impostor::ViewCell;
 use crate::views::{Context, ProblemViews};
 
 /// Turns the selection into the placement JSON structure.
@@ -32,23 +31,7 @@ pub fn build_placement(
             let node = &h.nodes[c.node as usize];
             let mut objects = h.objects(c.node).to_vec();
             objects.sort_unstable();
-            let view_cell = match c.cell {
-                ViewCell::Shaft {
-                    apex,
-                    axis,
-                    half_angle,
-                    min_distance,
-                } => ViewCellJson::Shaft {
-                    apex: apex.to_array(),
-                    axis: axis.to_array(),
-                    half_angle_deg: half_angle.to_degrees(),
-                    min_distance,
-                },
-                ViewCell::Box(b) => ViewCellJson::Box {
-                    min: b.min.to_array(),
-                    max: b.max.to_array(),
-                },
-            };
+            let view_cell = ViewCellJson::from(&c.cell);
             let d = c.cell.closest_distance(node.sphere.center);
             let cost = ctx.model.impostor(c.spec.layers, node.sphere.radius, d);
             PlacedImpostor {
