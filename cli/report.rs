@@ -100,7 +100,11 @@ pub fn run(a: ReportArgs) -> Result<ExitCode> {
     let broken = r
         .runs
         .iter()
-        .filter(|x| x.eval.as_ref().is_some_and(|e| e.violations_in_solved > 0))
+        .filter(|x| {
+            x.eval
+                .as_ref()
+                .is_some_and(|e| e.guarantee_violations() > 0)
+        })
         .count();
     eprintln!(
         "{} runs ({failed} failed, {broken} with a broken guarantee), {} walkthroughs: {}",

@@ -167,6 +167,9 @@ pub fn sample_report() -> crate::report::Report {
                 violations: over * 3,
                 violations_in_solved: over * 2,
                 max_ms_in_solved: t * if over == 1 { 1.08 } else { k * 0.97 },
+                cpv_views: 1000,
+                violations_in_cpv_views: over,
+                control_violations: 40,
                 parallax_max_px: Some(0.9 + 0.1 * k),
             }),
         }

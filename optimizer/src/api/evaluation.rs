@@ -6,6 +6,43 @@ use serde::{Deserialize, Serialize};
 
 use crate::api::job::VisibilityMode;
 
+impl Evaluation {
+    /// True when the check found the guarantee broken: a view over the
+    /// target in a solved problem view (uniform or sampled inside one) or
+    /// in none, or an impostor used outside its view cell.
+    pub fn guarantee_broken(&self) -> bool {
+        self.violations_in_solved > 0
+            || self.violations_in_cpv_views > 0
+            || self.impostors_outside_view_cell > 0
+    }
+
+    /// True when the control (the same views with no impostor) breaks the
+    /// target where the placement claims to meet it: only then could this
+    /// check have failed.
+    pub fn control_bites(&self) -> bool {
+        self.control.violations_in_solved > 0 || self.control.violations_in_cpv_views > 0
+    }
+}
+
+/// The evaluation's control: the same views, the same visible sets, every
+/// impostor removed (`evaluation.control`).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct ControlCheck {
+    /// Uniform views over the target without impostors.
+    pub violations: u64,
+    /// Uniform views over the target without impostors whose problem view
+    /// is solved (or that lie in none): what `violations_in_solved` would
+    /// be if the impostors did nothing.
+    pub violations_in_solved: u64,
+    /// Views inside solved problem views over the target without
+    /// impostors: what `violations_in_cpv_views` would be if the impostors
+    /// did nothing.
+    pub violations_in_cpv_views: u64,
+    /// Largest time of any sampled view without impostors, ms.
+    pub max_ms: f64,
+}
+
 /// The check of the visible sets (`evaluation.visibility`).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
@@ -78,12 +115,25 @@ pub struct Evaluation {
     pub views_in_cpvs: u64,
     /// Views that lie in an unsolved CPV.
     pub views_in_unsolved_cpvs: u64,
-    /// Views where an impostor of their CPV was used outside its view cell
-    /// (must be 0).
+    /// Views (uniform or inside problem views) where an impostor of their
+    /// CPV was used outside its view cell (must be 0).
     pub impostors_outside_view_cell: u64,
     /// Mean of `target − time` over views within the target, ms
     /// (over-conservativeness).
     pub mean_slack_ms: f64,
+    /// Views sampled inside problem views (`--cpv-views`): where the
+    /// placement needed impostors.
+    pub cpv_views: u64,
+    /// Of them, views whose problem view is unsolved.
+    pub cpv_views_in_unsolved: u64,
+    /// Views inside solved problem views over the target: must be 0.
+    pub violations_in_cpv_views: u64,
+    /// Largest time among the views inside solved problem views, ms.
+    pub max_ms_in_cpv_views: f64,
+    /// The same views timed with no impostor: where the control has no
+    /// violation either, the check could not have failed and proves
+    /// nothing about the impostors.
+    pub control: ControlCheck,
     /// Image error of the impostors (`evaluate --images N`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub image: Option<ImageReport>,

@@ -155,10 +155,29 @@ pub struct EvalSummary {
     pub violations_in_solved: u64,
     /// Largest view time among views in solved problem views or in none, ms.
     pub max_ms_in_solved: f64,
+    /// Views sampled inside problem views.
+    #[serde(default)]
+    pub cpv_views: u64,
+    /// Views inside solved problem views over the target (must be 0).
+    #[serde(default)]
+    pub violations_in_cpv_views: u64,
+    /// The control: views in solved problem views (or in none, or sampled
+    /// inside solved problem views) over the target with every impostor
+    /// removed. 0 means the run's check could not have failed.
+    #[serde(default)]
+    pub control_violations: u64,
     /// Largest measured parallax of an impostor, pixels (none without
     /// impostors).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub parallax_max_px: Option<f64>,
+}
+
+impl EvalSummary {
+    /// Views that broke the guarantee: over the target in solved problem
+    /// views (uniform or sampled inside them) or in none.
+    pub fn guarantee_violations(&self) -> u64 {
+        self.violations_in_solved + self.violations_in_cpv_views
+    }
 }
 
 impl From<&crate::api::evaluation::Evaluation> for EvalSummary {
@@ -172,6 +191,9 @@ impl From<&crate::api::evaluation::Evaluation> for EvalSummary {
             violations: e.violations,
             violations_in_solved: e.violations_in_solved,
             max_ms_in_solved: e.max_ms_in_solved,
+            cpv_views: e.cpv_views,
+            violations_in_cpv_views: e.violations_in_cpv_views,
+            control_violations: e.control.violations_in_solved + e.control.violations_in_cpv_views,
             parallax_max_px: e.parallax.as_ref().map(|p| p.max_px),
         }
     }

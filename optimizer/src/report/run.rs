@@ -253,6 +253,7 @@ fn one_run<'a>(
     let prepared = preps.for_job(input, job)?;
     let eval = EvalOptions {
         views,
+        cpv_views: views,
         seed: 1,
         check_rays: 0,
         check_objects: 0,

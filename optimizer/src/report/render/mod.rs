@@ -378,6 +378,7 @@ mod tests {
         for run in &mut r.runs {
             if let Some(e) = &mut run.eval {
                 e.violations_in_solved = 0;
+                e.violations_in_cpv_views = 0;
             }
         }
         let html = render_html(&r);

@@ -124,13 +124,15 @@ impl<'a> Page<'a> {
             Marker::Ring,
         );
         for x in runs.iter().filter(|x| evaluated(x)) {
-            if let Some(e) = x.eval.as_ref().filter(|e| e.violations_in_solved > 0) {
+            if let Some(e) = x.eval.as_ref().filter(|e| e.guarantee_violations() > 0) {
                 crossed
                     .points
                     .push((x.target_frame_time_ms, e.max_ms_in_solved));
                 crossed.tips.push(format!(
                     "{}, target {} ms: {} view(s) over the target in solved problem views",
-                    x.method, x.target_frame_time_ms, e.violations_in_solved
+                    x.method,
+                    x.target_frame_time_ms,
+                    e.guarantee_violations()
                 ));
             }
         }
@@ -175,13 +177,13 @@ impl<'a> Page<'a> {
             .iter()
             .filter_map(|x| {
                 let e = x.eval.as_ref()?;
-                (e.violations_in_solved > 0).then(|| {
+                (e.guarantee_violations() > 0).then(|| {
                     format!(
                         "<strong>{}</strong> ({}, target {} ms: {} view(s) over the target, max {:.3} ms)",
                         esc(&x.method),
                         esc(&setting(x)),
                         x.target_frame_time_ms,
-                        e.violations_in_solved,
+                        e.guarantee_violations(),
                         e.max_ms_in_solved
                     )
                 })
@@ -532,8 +534,8 @@ impl<'a> Page<'a> {
             let ms = |f: fn(&crate::report::EvalSummary) -> f64| {
                 e.map_or("–".into(), |e| format!("{:.3}", f(e)))
             };
-            let viol = e.map_or("–".to_string(), |e| e.violations_in_solved.to_string());
-            let bad_viol = e.is_some_and(|e| e.violations_in_solved > 0);
+            let viol = e.map_or("–".to_string(), |e| e.guarantee_violations().to_string());
+            let bad_viol = e.is_some_and(|e| e.guarantee_violations() > 0);
             let _ = writeln!(
                 h,
                 "<tr><td>{}</td><td>{}</td><td class=\"n\">{}</td><td class=\"n\">{}</td>\
