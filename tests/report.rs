@@ -20,7 +20,7 @@ fn a_report_compares_methods_over_a_target_sweep() {
         "--methods",
         "shafts,boxes,per-cell,env-map,shafts+prune",
         "--sweep",
-        "target_frame_time_ms=5.5,6,7",
+        "target_frame_time_ms=4.5,5,5.5",
         "--views",
         "800",
         "-o",
@@ -32,7 +32,14 @@ fn a_report_compares_methods_over_a_target_sweep() {
     assert_eq!(runs.len(), 5 * 4, "base + 3 targets per method");
     for run in runs {
         assert_eq!(run["status"], "ok", "{run}");
-        assert_eq!(run["eval"]["violations_in_solved"], 0, "{run}");
+        let e = &run["eval"];
+        assert_eq!(e["violations_in_solved"], 0, "{run}");
+        assert_eq!(e["violations_in_cpv_views"], 0, "{run}");
+        // The control: without impostors the same views break the target,
+        // for every method with a guarantee (env-map has none).
+        if run["method"] != "env-map" {
+            assert!(e["control_violations"].as_u64().unwrap() > 0, "{run}");
+        }
     }
     // Memory falls as the target rises, for every method with a guarantee.
     for m in ["shafts", "boxes", "per-cell", "shafts+prune"] {
@@ -83,18 +90,17 @@ fn the_stability_mode_reports_each_methods_spread() {
         let mem = &m["memory"];
         assert!(mem["min"].as_f64().unwrap() <= mem["mean"].as_f64().unwrap());
         assert!(mem["mean"].as_f64().unwrap() <= mem["max"].as_f64().unwrap());
-        // Shuffling objects changes the hierarchy, yet the result stays in
-        // the same range as the base.
+        // Shuffling objects changes the hierarchy, and a target 1 % away
+        // or a grid shifted by half a cell change the problem views, yet
+        // the memory stays within a factor of two of the base.
         let base = settings[0]["memory_bytes"].as_f64().unwrap();
-        for x in settings
-            .iter()
-            .filter(|x| x["label"].as_str().unwrap().contains("shuffled"))
-        {
-            let v = x["memory_bytes"].as_f64().unwrap();
-            assert!(
-                v < 10.0 * base + 1e6 && v > base / 10.0 - 1e6,
-                "{x} vs {base}"
-            );
+        assert!(base > 0.0, "{m}");
+        for x in settings.iter().filter(|x| {
+            let l = x["label"].as_str().unwrap();
+            l.contains("shuffled") || l.contains("grid") || l.contains("1%")
+        }) {
+            let ratio = x["memory_bytes"].as_f64().unwrap() / base;
+            assert!((0.5..=2.0).contains(&ratio), "{x} vs {base}: {ratio}");
         }
     }
 }
@@ -128,10 +134,16 @@ fn the_failure_scene_leaves_problem_views_unsolved_for_every_method() {
                 .iter()
                 .any(|c| c["solved"] == false && c["time_ms_final"].as_f64().unwrap() > 5.0)
         );
-        let e = dir.join(format!("{m}.eval.json"));
-        let o = evaluate(&scene, &job, &p, &e, 1000);
-        assert_eq!(code(&o), 0, "{m}: {}", stderr(&o));
-        let eval = read_json(&e);
+        // The problem views it solved are clean, where the same views
+        // without impostors are not (env-map solves none it could break).
+        let eval = if m == "env-map" {
+            let e = dir.join(format!("{m}.eval.json"));
+            let o = evaluate(&scene, &job, &p, &e, 1000);
+            assert_eq!(code(&o), 0, "{m}: {}", stderr(&o));
+            read_json(&e)
+        } else {
+            check_guarantee(&scene, &job, &p, 4000, 0.01, &[]).eval
+        };
         assert_eq!(eval["violations_in_solved"], 0, "{m}: {eval}");
         assert!(
             eval["violations"].as_u64().unwrap() > 0,

@@ -111,3 +111,111 @@ pub fn evaluate(scene: &Path, job: &Path, placement: &Path, out: &Path, views: u
         &views,
     ])
 }
+
+/// The figures of a guarantee check and its control.
+pub struct Checked {
+    /// The evaluation of the placement.
+    pub eval: serde_json::Value,
+    /// Views over the target, with every impostor removed, where the
+    /// placement claims the target (uniform views in solved problem views or
+    /// in none, and views sampled inside solved problem views).
+    pub control_violations: u64,
+}
+
+/// Checks the frame-time guarantee of `placement` with its control:
+/// evaluates it (`views` uniform views and as many inside problem views,
+/// seed 1, `extra` arguments such as `--pvs`), then the same placement with
+/// every impostor stripped, with the same views and seed. Asserts that the
+/// stripped placement breaks the target where the placement claims to meet
+/// it — in at least `min_share` of the views that lie in solved problem
+/// views, so the check could have failed — that the evaluation's own `control`
+/// reports the same figures, and that the placement itself breaks nothing.
+pub fn check_guarantee(
+    scene: &Path,
+    job: &Path,
+    placement: &Path,
+    views: u32,
+    min_share: f64,
+    extra: &[&str],
+) -> Checked {
+    let dir = placement.parent().unwrap();
+    let name = placement.file_stem().unwrap().to_string_lossy();
+    let eval_of = |p: &Path, out: &Path| {
+        let views = views.to_string();
+        let mut args = vec![
+            "evaluate",
+            s(scene),
+            "--job",
+            s(job),
+            "--placement",
+            s(p),
+            "-o",
+            s(out),
+            "--views",
+            &views,
+        ];
+        args.extend_from_slice(extra);
+        let o = run(&args);
+        (code(&o), stderr(&o), read_json(out))
+    };
+    let (c, err, eval) = eval_of(placement, &dir.join(format!("{name}.eval.json")));
+    assert_eq!(c, 0, "{}: {err}", placement.display());
+    let mut stripped = read_json(placement);
+    for cpv in stripped["cpvs"].as_array_mut().unwrap() {
+        cpv["impostors"] = serde_json::json!([]);
+    }
+    let sp = dir.join(format!("{name}.stripped.json"));
+    std::fs::write(&sp, serde_json::to_vec(&stripped).unwrap()).unwrap();
+    let (c, err, bare) = eval_of(&sp, &dir.join(format!("{name}.stripped.eval.json")));
+    let bare_violations = bare["violations_in_solved"].as_u64().unwrap()
+        + bare["violations_in_cpv_views"].as_u64().unwrap();
+    let n = |k: &str| bare[k].as_u64().unwrap();
+    let in_solved = n("views_in_cpvs") - n("views_in_unsolved_cpvs") + n("cpv_views")
+        - n("cpv_views_in_unsolved");
+    assert!(
+        bare_violations as f64 >= min_share * in_solved as f64 && bare_violations > 0,
+        "the control does not fail: without impostors {bare_violations} of {in_solved} views in \
+         solved problem views break the target (want at least {:.1} %), so this check proves \
+         nothing: {bare}",
+        100.0 * min_share
+    );
+    assert_eq!(c, 4, "the stripped placement must fail the check: {err}");
+    // The evaluation's own control is the stripped placement's figures.
+    let control = &eval["control"];
+    assert_eq!(
+        control["violations_in_solved"], bare["violations_in_solved"],
+        "{control}"
+    );
+    assert_eq!(
+        control["violations_in_cpv_views"], bare["violations_in_cpv_views"],
+        "{control}"
+    );
+    for k in [
+        "violations_in_solved",
+        "violations_in_cpv_views",
+        "impostors_outside_view_cell",
+    ] {
+        assert_eq!(eval[k], 0, "{k}: {eval}");
+    }
+    Checked {
+        eval,
+        control_violations: bare_violations,
+    }
+}
+
+/// A scene of `../shared/scenes/` by name (without `.glb`), or `None` with
+/// a message when the folder is absent. With `IMPOSTOR_REQUIRE_SCENES` set
+/// (as `.ci/run` does) a missing scene is a failure, not a skip.
+pub fn shared_scene(name: &str) -> Option<PathBuf> {
+    let path = root().join("../shared/scenes").join(format!("{name}.glb"));
+    if path.exists() {
+        return Some(path);
+    }
+    assert!(
+        std::env::var_os("IMPOSTOR_REQUIRE_SCENES").is_none(),
+        "{} is missing and IMPOSTOR_REQUIRE_SCENES is set",
+        path.display()
+    );
+    eprintln!("skipped: {} is absent", path.display());
+    None
+}

@@ -36,12 +36,12 @@ fn run_ok(args: &[&str]) {
 fn conservative_visibility_misses_nothing_and_keeps_the_guarantee() {
     let dir = tmp("vis-cons");
     let city = city("0.1");
-    let (p, st, e) = (dir.join("p.json"), dir.join("s.json"), dir.join("e.json"));
+    let (p, st) = (dir.join("p.json"), dir.join("s.json"));
     let o = place(&city, &vis_job(), &p, &["--stats", s(&st)]);
     assert_eq!(code(&o), 0, "{}", stderr(&o));
-    let o = evaluate(&city, &vis_job(), &p, &e, 10_000);
-    assert_eq!(code(&o), 0, "{}", stderr(&o));
-    let eval = read_json(&e);
+    // The guarantee with culled sets, where the same views without
+    // impostors break it.
+    let eval = check_guarantee(&city, &vis_job(), &p, 10_000, 0.01, &[]).eval;
     assert_eq!(eval["violations"], 0, "{eval}");
     let v = &eval["visibility"];
     assert_eq!(v["mode"], "conservative");
@@ -71,13 +71,13 @@ fn conservative_visibility_misses_nothing_and_keeps_the_guarantee() {
         "the visibility job must still have problems"
     );
     assert!(
-        cpvs(&with) * 10 < cpvs(&without),
+        cpvs(&with) * 5 < cpvs(&without),
         "{} vs {}",
         cpvs(&with),
         cpvs(&without)
     );
     assert!(
-        mem(&with) * 10 < mem(&without),
+        mem(&with) * 5 < mem(&without),
         "{} vs {}",
         mem(&with),
         mem(&without)
@@ -256,14 +256,17 @@ fn visibility_inputs_that_are_missing_or_wrong_are_named() {
 
 #[test]
 fn sampled_visibility_on_a_real_interior_reports_its_misses() {
-    let scene = root().join("../shared/scenes/Ifc2x3_Duplex_Architecture.glb");
-    if !scene.exists() {
-        eprintln!("skipped: {} is absent", scene.display());
+    let Some(scene) = shared_scene("Ifc2x3_Duplex_Architecture") else {
         return;
-    }
+    };
     let dir = tmp("vis-interior");
-    let base = root().join("fixtures/jobs/Ifc2x3_Duplex_Architecture.json");
-    let job = job_with(&dir, "sampled.json", &base, Value::from("sampled"));
+    // 3.5 ms: below the slowest views of the apartment with sampled sets
+    // (4.1 ms over 3,000 views), so the job has problem views.
+    let mut base = read_json(&root().join("fixtures/jobs/Ifc2x3_Duplex_Architecture.json"));
+    base["target_frame_time_ms"] = Value::from(3.5);
+    let plain = dir.join("plain.json");
+    std::fs::write(&plain, serde_json::to_vec(&base).unwrap()).unwrap();
+    let job = job_with(&dir, "sampled.json", &plain, Value::from("sampled"));
     let (p, st, e) = (dir.join("p.json"), dir.join("s.json"), dir.join("e.json"));
     run_ok(&[
         "place",
@@ -277,20 +280,29 @@ fn sampled_visibility_on_a_real_interior_reports_its_misses() {
     ]);
     let v = &read_json(&st)["visibility"];
     assert_eq!(v["mode"], "sampled");
-    let rate = v["missed_object_rate"].as_f64().unwrap();
-    assert!((0.0..1.0).contains(&rate), "{v}");
     assert!(v["missing_mass_mean"].as_f64().is_some(), "{v}");
     assert!(v["mean_visible_fraction"].as_f64().unwrap() < 0.8, "{v}");
+    // The rays leave visible objects unfound, and say so.
+    let rate = v["missed_object_rate"].as_f64().unwrap();
+    assert!(rate > 0.0 && rate < 0.5, "{v}");
+    let placement = read_json(&p);
+    let cpvs = placement["summary"]["cpvs"].as_u64().unwrap();
+    assert!(cpvs > 0, "the job must have problem views");
     let o = evaluate(&scene, &job, &p, &e, 3000);
-    assert_eq!(code(&o), 0, "{}", stderr(&o));
+    assert!(matches!(code(&o), 0 | 4), "{}", stderr(&o));
     let ev = read_json(&e);
-    assert_eq!(ev["visibility"]["views_checked"], 3000, "{ev}");
-    assert_eq!(ev["violations_in_solved"], 0, "{ev}");
-    // Without visibility the same job needs impostors; with it, fewer.
+    let check = &ev["visibility"];
+    assert_eq!(check["views_checked"], 3000, "{ev}");
+    // Where the estimate expects misses, the check finds them: the
+    // evaluation's rays see objects the sets lack.
+    assert!(check["missed_objects"].as_u64().unwrap() > 0, "{check}");
+    assert!(check["views_with_misses"].as_u64().unwrap() > 0, "{check}");
+    assert!(ev["views_in_unsolved_cpvs"].as_u64().unwrap() + ev["cpv_views"].as_u64().unwrap() > 0);
+    // Without visibility the same job has more problem views.
     let p0 = dir.join("p0.json");
-    run_ok(&["place", s(&scene), "--job", s(&base), "-o", s(&p0)]);
-    let cpvs = |p: &Path| read_json(p)["summary"]["cpvs"].as_u64().unwrap();
-    assert!(cpvs(&p) < cpvs(&p0), "{} vs {}", cpvs(&p), cpvs(&p0));
+    run_ok(&["place", s(&scene), "--job", s(&plain), "-o", s(&p0)]);
+    let cpvs0 = read_json(&p0)["summary"]["cpvs"].as_u64().unwrap();
+    assert!(cpvs < cpvs0, "{cpvs} vs {cpvs0}");
 }
 
 #[test]
@@ -338,10 +350,7 @@ fn levels_of_detail_are_chosen_and_save_impostor_memory() {
         .collect();
     assert!(chosen.iter().filter(|&&c| c > 0).count() >= 2, "{chosen:?}");
     // The evaluation counts the level drawn at each view: still no violation.
-    let e = dir.join("e.json");
-    let o = evaluate(&lod, &job, &b, &e, 3000);
-    assert_eq!(code(&o), 0, "{}", stderr(&o));
-    assert_eq!(read_json(&e)["violations_in_solved"], 0);
+    check_guarantee(&lod, &job, &b, 3000, 0.01, &[]);
     // Levels switched off: the same as the plain city.
     let off = dir.join("off.json");
     let mut j = read_json(&job);
