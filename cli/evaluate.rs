@@ -8,19 +8,16 @@ use clap::Args;
 use optimizer::api::placement::Placement;
 use optimizer::evaluate::EvalOptions;
 use optimizer::evaluate::images::{ImageOptions, LayerSource};
-use optimizer::input::{GeometryUse, Load, SceneInput, Source};
+use optimizer::input::GeometryUse;
 use optimizer::{Error, Result};
 
 use crate::output::{write_json, write_output};
-use crate::{read_job, set_threads};
+use crate::{SceneJob, read_job};
 
 #[derive(Args)]
 pub struct EvaluateArgs {
-    /// Scene: .glb, .gltf or a JSON scene summary.
-    scene: PathBuf,
-    /// Job JSON.
-    #[arg(long)]
-    job: PathBuf,
+    #[command(flatten)]
+    input: SceneJob,
     /// Placement JSON written by `place`.
     #[arg(long)]
     placement: PathBuf,
@@ -36,9 +33,6 @@ pub struct EvaluateArgs {
     /// Seed of the view sampler.
     #[arg(long, default_value_t = 1)]
     seed: u64,
-    /// Worker threads (default: all cores).
-    #[arg(long)]
-    threads: Option<usize>,
     /// Also render this many views in CPVs with impostors twice (all
     /// geometry; geometry with the impostors) and report the image error.
     #[arg(long, default_value_t = 0)]
@@ -52,9 +46,6 @@ pub struct EvaluateArgs {
     /// Write the worst view's renders side by side as a PNG into this directory.
     #[arg(long)]
     dump: Option<PathBuf>,
-    /// Precomputed PVS file (for `"visibility": "precomputed"`).
-    #[arg(long)]
-    pvs: Option<PathBuf>,
     /// Visibility check: rays per view through the image (0: none).
     #[arg(long, default_value_t = 256)]
     check_rays: u32,
@@ -75,18 +66,14 @@ pub fn read_placement(path: &std::path::Path) -> Result<Placement> {
 }
 
 pub fn run(a: EvaluateArgs) -> Result<ExitCode> {
-    set_threads(a.threads)?;
-    let job_name = a.job.display().to_string();
-    let job = read_job(&a.job)?;
+    let job = read_job(&a.input.job)?;
     let geometry = if a.images > 0 {
         GeometryUse::Required
     } else {
         GeometryUse::ForChecks
     };
-    let load =
-        Load::new(Source::File(&a.scene), geometry).with_pvs(a.pvs.as_deref().map(Source::File));
-    let input = SceneInput::load(&load, &job, &job_name)?;
-    let prepared = input.prepare(&job, &job_name)?;
+    let input = a.input.load(&job, geometry)?;
+    let prepared = input.prepare(&job, &a.input.job_name())?;
     let name = a.placement.display().to_string();
     let p = read_placement(&a.placement)?;
     let opts = EvalOptions {

@@ -14,12 +14,13 @@ mod pvs;
 mod report;
 mod schema;
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
 use clap::builder::PossibleValue;
 use clap::{Parser, Subcommand, ValueEnum};
 use optimizer::api::job::{Job, Method};
+use optimizer::input::{GeometryUse, Load, SceneInput, Source};
 use optimizer::{Error, Result};
 
 /// Automatic impostor placement for guaranteed frame rates and low memory.
@@ -78,6 +79,39 @@ impl ValueEnum for MethodArg {
 
     fn to_possible_value(&self) -> Option<PossibleValue> {
         Some(PossibleValue::new(self.0.name()))
+    }
+}
+
+/// The scene and job a placing command reads, with its PVS file and thread
+/// count.
+#[derive(clap::Args)]
+struct SceneJob {
+    /// Scene: .glb, .gltf or a JSON scene summary.
+    scene: PathBuf,
+    /// Job JSON (schemas/job.schema.json).
+    #[arg(long)]
+    job: PathBuf,
+    /// Precomputed PVS file (for `"visibility": "precomputed"`).
+    #[arg(long)]
+    pvs: Option<PathBuf>,
+    /// Worker threads (default: all cores).
+    #[arg(long)]
+    threads: Option<usize>,
+}
+
+impl SceneJob {
+    /// How errors name the job.
+    fn job_name(&self) -> String {
+        self.job.display().to_string()
+    }
+
+    /// Sets the thread count, then loads the scene (with its geometry as
+    /// `geometry` says, and the PVS file) for `job`.
+    fn load(&self, job: &Job, geometry: GeometryUse) -> Result<SceneInput> {
+        set_threads(self.threads)?;
+        let load = Load::new(Source::File(&self.scene), geometry)
+            .with_pvs(self.pvs.as_deref().map(Source::File));
+        SceneInput::load(&load, job, &self.job_name())
     }
 }
 

@@ -6,26 +6,20 @@ use std::process::ExitCode;
 use clap::Args;
 use optimizer::Result;
 use optimizer::control::Control;
-use optimizer::input::{GeometryUse, Load, SceneInput, Source};
+use optimizer::input::GeometryUse;
 use optimizer::place::PlaceOptions;
 
 use crate::output::write_json;
 use crate::progress::Progress;
-use crate::{MethodArg, read_job, set_threads};
+use crate::{MethodArg, SceneJob, read_job};
 
 #[derive(Args)]
 pub struct PlaceArgs {
-    /// Scene: .glb, .gltf or a JSON scene summary.
-    scene: PathBuf,
-    /// Job JSON (schemas/job.schema.json).
-    #[arg(long)]
-    job: PathBuf,
+    #[command(flatten)]
+    input: SceneJob,
     /// Output placement JSON (default: standard output).
     #[arg(short, long)]
     out: Option<PathBuf>,
-    /// Worker threads (default: all cores).
-    #[arg(long)]
-    threads: Option<usize>,
     /// Write timings and counters to this JSON file.
     #[arg(long)]
     stats: Option<PathBuf>,
@@ -35,25 +29,18 @@ pub struct PlaceArgs {
     /// Print each stage's wall time to stderr.
     #[arg(short, long)]
     verbose: bool,
-    /// Precomputed PVS file (for `"visibility": "precomputed"`).
-    #[arg(long)]
-    pvs: Option<PathBuf>,
     /// Placement method (overrides the job's `method`).
     #[arg(long)]
     method: Option<MethodArg>,
 }
 
 pub fn run(a: PlaceArgs) -> Result<ExitCode> {
-    set_threads(a.threads)?;
-    let job_name = a.job.display().to_string();
-    let mut job = read_job(&a.job)?;
+    let mut job = read_job(&a.input.job)?;
     if let Some(m) = a.method {
         job.method = Some(m.0);
     }
-    let load = Load::new(Source::File(&a.scene), GeometryUse::WhenNeeded)
-        .with_pvs(a.pvs.as_deref().map(Source::File));
-    let input = SceneInput::load(&load, &job, &job_name)?;
-    let prepared = input.prepare(&job, &job_name)?;
+    let input = a.input.load(&job, GeometryUse::WhenNeeded)?;
+    let prepared = input.prepare(&job, &a.input.job_name())?;
     let progress = Progress::spinner(a.verbose);
     let observer = |e: optimizer::control::Event<'_>| progress.event(e);
     let output = prepared.place(

@@ -7,21 +7,19 @@ use std::process::ExitCode;
 use clap::Args;
 use optimizer::api::job::{Job, Method};
 use optimizer::control::Control;
-use optimizer::input::{GeometryUse, Load, SceneInput, Source};
+use optimizer::input::GeometryUse;
 use optimizer::report::{self, RunStatus};
 use optimizer::{Error, Result};
 
 use crate::output::{write_json, write_output};
 use crate::progress::Progress;
-use crate::{MethodArg, set_threads};
+use crate::{MethodArg, SceneJob};
 
 #[derive(Args)]
 pub struct ReportArgs {
-    /// Scene: .glb, .gltf or a JSON scene summary.
-    scene: PathBuf,
-    /// The base job JSON.
-    #[arg(long)]
-    job: PathBuf,
+    /// The scene and the base job.
+    #[command(flatten)]
+    input: SceneJob,
     /// Methods to compare, comma-separated (default: all).
     #[arg(long, value_delimiter = ',')]
     methods: Vec<MethodArg>,
@@ -36,21 +34,14 @@ pub struct ReportArgs {
     /// Views per evaluation.
     #[arg(long, default_value_t = 4000)]
     views: u64,
-    /// Precomputed PVS file (for `"visibility": "precomputed"`).
-    #[arg(long)]
-    pvs: Option<PathBuf>,
-    /// Worker threads (default: all cores).
-    #[arg(long)]
-    threads: Option<usize>,
     /// Output directory.
     #[arg(short, long)]
     out: PathBuf,
 }
 
 pub fn run(a: ReportArgs) -> Result<ExitCode> {
-    set_threads(a.threads)?;
-    let job_name = a.job.display().to_string();
-    let text = std::fs::read(&a.job).map_err(|e| Error::io(&a.job, e))?;
+    let job_name = a.input.job_name();
+    let text = std::fs::read(&a.input.job).map_err(|e| Error::io(&a.input.job, e))?;
     let parsed = Job::from_json(&text, &job_name)?;
     let job_value: serde_json::Value = serde_json::from_slice(&text)
         .map_err(|e| Error::bad(&job_name, format!("invalid job JSON: {e}")))?;
@@ -64,11 +55,10 @@ pub fn run(a: ReportArgs) -> Result<ExitCode> {
         .iter()
         .map(|s| report::run::parse_sweep(s))
         .collect::<Result<Vec<_>>>()?;
-    let load = Load::new(Source::File(&a.scene), GeometryUse::WhenNeeded)
-        .with_pvs(a.pvs.as_deref().map(Source::File));
-    let input = SceneInput::load(&load, &parsed, &job_name)?;
+    let input = a.input.load(&parsed, GeometryUse::WhenNeeded)?;
     std::fs::create_dir_all(&a.out).map_err(|e| Error::io(&a.out, e))?;
     let name = a
+        .input
         .scene
         .file_name()
         .map(|n| n.to_string_lossy().into_owned())
