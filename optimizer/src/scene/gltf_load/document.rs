@@ -1,0 +1,178 @@
+//! The glTF document before anything is read: the GLB header, the
+//! `gltf` crate's errors, and the checks of the JSON root the crate lacks
+//! (extensions, counts, strides).
+
+use super::*;
+
+/// Checks the GLB header ourselves (a `length` below 12 overflows inside
+/// `gltf`), with clearer messages for truncated files.
+pub(crate) fn check_glb_header(bytes: &[u8], source: &str) -> Result<()> {
+    if !bytes.starts_with(b"glTF") {
+        return Ok(());
+    }
+    if bytes.len() < 12 {
+        return Err(Error::bad(
+            source,
+            format!(
+                "truncated GLB: {} bytes, shorter than the 12-byte header",
+                bytes.len()
+            ),
+        ));
+    }
+    let word =
+        |at: usize| u32::from_le_bytes([bytes[at], bytes[at + 1], bytes[at + 2], bytes[at + 3]]);
+    let version = word(4);
+    if version != 2 {
+        return Err(Error::bad(
+            source,
+            format!("GLB version {version} is not supported (only glTF 2.0)"),
+        ));
+    }
+    let length = word(8) as usize;
+    if length < 20 {
+        return Err(Error::bad(
+            source,
+            format!("GLB header length {length} is too small for a header and a JSON chunk"),
+        ));
+    }
+    if length > bytes.len() {
+        return Err(Error::bad(
+            source,
+            format!(
+                "truncated GLB: the header says {length} bytes but there are only {}",
+                bytes.len()
+            ),
+        ));
+    }
+    Ok(())
+}
+
+/// Formats a `gltf` crate error, keeping long validation reports short.
+pub(crate) fn gltf_error(source: &str, e: gltf::Error) -> Error {
+    match e {
+        gltf::Error::Validation(errors) => {
+            let shown: Vec<String> = errors
+                .iter()
+                .take(5)
+                .map(|(path, err)| format!("{path}: {err}"))
+                .collect();
+            let more = errors.len().saturating_sub(shown.len());
+            let mut message = format!("invalid glTF: {}", shown.join("; "));
+            if more > 0 {
+                message.push_str(&format!(" (and {more} more)"));
+            }
+            Error::bad(source, message)
+        }
+        gltf::Error::Binary(e) => Error::bad(source, format!("malformed GLB: {e}")),
+        gltf::Error::Deserialize(e) => Error::bad(source, format!("malformed glTF JSON: {e}")),
+        e => Error::bad(source, format!("malformed glTF: {e}")),
+    }
+}
+
+/// Checks what `gltf`'s own validation would panic on, and handles
+/// `extensionsRequired`, before running that validation.
+pub(crate) fn precheck_root(root: &mut gltf::json::Root, source: &str) -> Result<()> {
+    precheck_root_with(root, source, false)
+}
+
+/// [`precheck_root`]; with `keep_base_color`, materials, base colour
+/// textures, their images and samplers are kept (every other texture slot
+/// is cleared, and a base colour texture without a usable `source`, such as
+/// a KTX2-only one, is dropped from its material).
+pub(crate) fn precheck_root_with(
+    root: &mut gltf::json::Root,
+    source: &str,
+    keep_base_color: bool,
+) -> Result<()> {
+    use gltf::json::mesh::Semantic;
+    use gltf::json::validation::Checked;
+
+    if root.nodes.len() > MAX_NODES {
+        return Err(Error::bad(
+            format!("{source}: nodes"),
+            format!(
+                "{} nodes, more than the limit of {MAX_NODES}",
+                root.nodes.len()
+            ),
+        ));
+    }
+    for ext in &root.extensions_required {
+        if let Some((_, hint)) = GEOMETRY_EXTENSIONS.iter().find(|(name, _)| name == ext) {
+            return Err(Error::bad(
+                format!("{source}: extensionsRequired"),
+                format!("the file requires {ext}, which is not supported; {hint}"),
+            ));
+        }
+        if !APPEARANCE_EXTENSIONS.contains(&ext.as_str()) && ext != "MSFT_lod" {
+            return Err(Error::bad(
+                format!("{source}: extensionsRequired"),
+                format!("the file requires the unknown extension {ext}"),
+            ));
+        }
+    }
+    // Placement ignores appearance, so these need not be understood (and
+    // `MSFT_lod` is read by `walk_scene`), and
+    // materials, textures and images are dropped before validation: a
+    // KTX2-only texture (no `source`) or a broken image then cannot reject
+    // a scene whose geometry is fine.
+    root.extensions_required.clear();
+    if keep_base_color {
+        let (textures, images, samplers, materials) = (
+            root.textures.len(),
+            root.images.len(),
+            root.samplers.len(),
+            root.materials.len(),
+        );
+        let usable: Vec<bool> = root
+            .textures
+            .iter()
+            .map(|t| t.source.value() < images && t.sampler.is_none_or(|s| s.value() < samplers))
+            .collect();
+        for m in &mut root.materials {
+            m.normal_texture = None;
+            m.occlusion_texture = None;
+            m.emissive_texture = None;
+            m.pbr_metallic_roughness.metallic_roughness_texture = None;
+            if let Some(t) = &m.pbr_metallic_roughness.base_color_texture
+                && (t.index.value() >= textures || !usable[t.index.value()])
+            {
+                m.pbr_metallic_roughness.base_color_texture = None;
+            }
+        }
+        for mesh in &mut root.meshes {
+            for prim in &mut mesh.primitives {
+                if prim.material.is_some_and(|m| m.value() >= materials) {
+                    prim.material = None;
+                }
+            }
+        }
+    } else {
+        root.materials.clear();
+        root.textures.clear();
+        root.images.clear();
+        root.samplers.clear();
+        for mesh in &mut root.meshes {
+            for prim in &mut mesh.primitives {
+                prim.material = None;
+            }
+        }
+    }
+
+    let accessors = root.accessors.len();
+    for (m, mesh) in root.meshes.iter().enumerate() {
+        for (p, prim) in mesh.primitives.iter().enumerate() {
+            if let Some(index) = prim.attributes.get(&Checked::Valid(Semantic::Positions))
+                && index.value() >= accessors
+            {
+                return Err(Error::bad(
+                    format!("{source}: mesh {m} primitive {p} POSITION"),
+                    format!(
+                        "accessor {} does not exist (the file has {accessors} accessors)",
+                        index.value()
+                    ),
+                ));
+            }
+        }
+    }
+    Ok(())
+}
