@@ -60,7 +60,8 @@ pub fn synthetic_job(nx: u32, nz: u32) -> Job {
 /// closed, outward-facing cuboid filling its bounds (one mesh per object,
 /// one opaque single-sided material).
 pub fn box_geometry(scene: &Scene) -> crate::scene::geometry::SceneGeometry {
-    use crate::scene::geometry::{Instance, Material, MeshData, SceneGeometry};
+    use crate::scene::geometry::{Instance, MeshData, SceneGeometry};
+    use crate::scene::material::Material;
     use glam::{DAffine3, Vec3};
     let mut meshes = Vec::new();
     let mut instances = Vec::new();

@@ -26,8 +26,9 @@ use crate::bake::{Layer, cluster_triangles, geom_objects, surface};
 use crate::input::Prepared;
 use crate::math::geom::{ViewFrustum, face_direction};
 use crate::math::rng::Rng;
-use crate::render::raster::{Raster, Surface, TextureRef, Vertex, View, Wrap};
+use crate::render::raster::{Raster, Surface, TextureRef, Vertex, View};
 use crate::scene::geometry::SceneGeometry;
+use crate::scene::material::Wrap;
 use crate::{Error, Result};
 
 /// Options of the image comparison.

@@ -22,7 +22,8 @@ pub fn parallax_check(job: &Job, placement: &Placement, seed: u64) -> Option<Par
         .par_iter()
         .map(|imp| {
             let mut rng = Rng::new(seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) ^ u64::from(imp.id));
-            crate::bake::parallax(imp, &mut rng, PARALLAX_SAMPLES, PARALLAX_SAMPLES) / theta
+            crate::model::layers::parallax(imp, &mut rng, PARALLAX_SAMPLES, PARALLAX_SAMPLES)
+                / theta
         })
         .collect();
     let budget = job.max_error_px;

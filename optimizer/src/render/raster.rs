@@ -15,17 +15,7 @@
 
 use glam::{DVec3, Vec2, Vec3};
 
-/// Texture coordinate wrapping (glTF sampler modes).
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-pub enum Wrap {
-    /// Repeat (the glTF default).
-    #[default]
-    Repeat,
-    /// Clamp to the edge texel.
-    ClampToEdge,
-    /// Repeat mirrored.
-    MirroredRepeat,
-}
+use crate::scene::material::Wrap;
 
 /// An RGBA8 texture (sRGB-encoded colour, linear alpha), borrowed.
 #[derive(Clone, Copy, Debug)]

@@ -31,7 +31,8 @@ use obvhs::aabb::Aabb;
 use obvhs::bvh2::builder::build_bvh2;
 use rayon::prelude::*;
 
-use crate::scene::geometry::{AlphaMode, Material, MeshData, SceneGeometry};
+use crate::scene::geometry::{MeshData, SceneGeometry};
+use crate::scene::material::{AlphaMode, Material};
 
 /// A ray's hit on a surface.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -113,7 +114,7 @@ impl RayCaster {
             let bounds = world_box(&inst.transform, &root);
             match material.alpha_mode {
                 AlphaMode::Opaque => opaque.push((bounds, item)),
-                AlphaMode::Mask(_) | AlphaMode::Blend => see_through.push((bounds, item)),
+                AlphaMode::Mask { .. } | AlphaMode::Blend => see_through.push((bounds, item)),
             }
         }
         RayCaster {
@@ -1043,7 +1044,7 @@ mod tests {
         let geom = scene(
             vec![quad(0), quad(1), cube(2)],
             vec![
-                material(AlphaMode::Mask(0.5), false),
+                material(AlphaMode::Mask { cutoff: 0.5 }, false),
                 material(AlphaMode::Blend, false),
                 material(AlphaMode::Opaque, false),
             ],
@@ -1318,9 +1319,9 @@ mod tests {
         let materials = vec![
             material(AlphaMode::Opaque, false),
             material(AlphaMode::Opaque, true),
-            material(AlphaMode::Mask(0.5), false),
+            material(AlphaMode::Mask { cutoff: 0.5 }, false),
             material(AlphaMode::Blend, true),
-            material(AlphaMode::Mask(0.3), true),
+            material(AlphaMode::Mask { cutoff: 0.3 }, true),
             material(AlphaMode::Blend, false),
         ];
         // Mostly opaque (materials 0 and 1), so most rays are blocked.

@@ -1,6 +1,7 @@
 //! Scene geometry for rendering: triangles, normals, texture coordinates and
-//! base-colour materials of a glTF scene, read with the same safety rules and
-//! the same object ids as [`crate::scene::gltf_load`] (which reads bounds only).
+//! materials ([`crate::scene::material::Material`]) of a glTF scene, read
+//! with the same safety rules and the same object ids as
+//! [`crate::scene::gltf_load`] (which reads bounds only).
 //! Only full detail is read: `MSFT_lod` level nodes are not objects (the
 //! shared scene walk skips them) and their meshes are not loaded.
 //!
@@ -27,6 +28,7 @@ use crate::scene::gltf_load::{
     AccessorBytes, base_dir_of, check_glb_header, check_indices, checked_accessor, gltf_error,
     guarded, precheck_root_with, read_uri, resolve_buffers, type_name, walk_scene,
 };
+use crate::scene::material::{AlphaMode, Material, Wrap};
 use crate::{Error, Result};
 
 /// The largest decoded image side, texels.
@@ -39,7 +41,8 @@ pub struct SceneGeometry {
     pub meshes: Vec<MeshData>,
     /// Placements of meshes, one per (object, primitive with triangles).
     pub instances: Vec<Instance>,
-    /// Materials: the glTF materials by index, then a default material.
+    /// Materials: the glTF materials by index, then the glTF default material
+    /// (for primitives that name none).
     pub materials: Vec<Material>,
     /// Decoded base colour images.
     pub textures: Vec<Texture>,
@@ -73,41 +76,6 @@ pub struct Instance {
     pub transform: DAffine3,
 }
 
-/// How a material treats alpha.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub enum AlphaMode {
-    /// Alpha ignored.
-    Opaque,
-    /// Discard below the cutoff.
-    Mask(f32),
-    /// Blended.
-    Blend,
-}
-
-/// A base-colour material.
-#[derive(Clone, Debug, PartialEq)]
-pub struct Material {
-    /// Linear RGBA factor.
-    pub base_color: [f32; 4],
-    /// Index into [`SceneGeometry::textures`].
-    pub base_color_texture: Option<u32>,
-    /// Alpha mode.
-    pub alpha_mode: AlphaMode,
-    /// Back faces drawn.
-    pub double_sided: bool,
-}
-
-impl Default for Material {
-    fn default() -> Self {
-        Material {
-            base_color: [1.0; 4],
-            base_color_texture: None,
-            alpha_mode: AlphaMode::Opaque,
-            double_sided: false,
-        }
-    }
-}
-
 /// A decoded texture with its sampler's wrapping.
 #[derive(Clone, Debug)]
 pub struct Texture {
@@ -118,9 +86,9 @@ pub struct Texture {
     /// RGBA8 (sRGB colour), rows from the top.
     pub rgba: Vec<u8>,
     /// Wrapping of `u`.
-    pub wrap_s: crate::render::raster::Wrap,
+    pub wrap_s: Wrap,
     /// Wrapping of `v`.
-    pub wrap_t: crate::render::raster::Wrap,
+    pub wrap_t: Wrap,
 }
 
 impl SceneGeometry {
@@ -210,14 +178,20 @@ fn load_inner(bytes: &[u8], source: &str, base_dir: Option<&Path>) -> Result<Sce
             tex = texture_of[t.index()];
         }
         materials.push(Material {
+            name: m.name().unwrap_or_default().to_string(),
             base_color: pbr.base_color_factor(),
             base_color_texture: tex,
+            metallic: pbr.metallic_factor(),
+            roughness: pbr.roughness_factor(),
             alpha_mode: match m.alpha_mode() {
                 gltf::material::AlphaMode::Opaque => AlphaMode::Opaque,
-                gltf::material::AlphaMode::Mask => AlphaMode::Mask(m.alpha_cutoff().unwrap_or(0.5)),
+                gltf::material::AlphaMode::Mask => AlphaMode::Mask {
+                    cutoff: m.alpha_cutoff().unwrap_or(0.5),
+                },
                 gltf::material::AlphaMode::Blend => AlphaMode::Blend,
             },
             double_sided: m.double_sided(),
+            unlit: m.unlit(),
         });
     }
     let default_material = materials.len() as u32;
@@ -261,8 +235,7 @@ fn load_inner(bytes: &[u8], source: &str, base_dir: Option<&Path>) -> Result<Sce
     })
 }
 
-fn wrap(m: gltf::texture::WrappingMode) -> crate::render::raster::Wrap {
-    use crate::render::raster::Wrap;
+fn wrap(m: gltf::texture::WrappingMode) -> Wrap {
     match m {
         gltf::texture::WrappingMode::ClampToEdge => Wrap::ClampToEdge,
         gltf::texture::WrappingMode::MirroredRepeat => Wrap::MirroredRepeat,
@@ -633,6 +606,7 @@ mod tests {
     #[test]
     fn textured_quad_reads_material_texture_and_uvs() {
         use crate::scene::glb::{self, GlbBuilder, Node, Sampler};
+        use crate::scene::material;
         let texels = [
             255u8, 0, 0, 255, 0, 255, 0, 255, 0, 0, 255, 255, 255, 255, 255, 128,
         ];
@@ -641,9 +615,9 @@ mod tests {
         let image = b.add_image_png("t", &png).unwrap();
         let sampler = b.add_sampler(&Sampler::linear_clamp()).unwrap();
         let texture = b.add_texture(image, Some(sampler)).unwrap();
-        let mut m = glb::Material::new("m", [0.5, 1.0, 1.0, 1.0]);
+        let mut m = material::Material::new("m", [0.5, 1.0, 1.0, 1.0]);
         m.base_color_texture = Some(texture);
-        m.alpha_mode = glb::AlphaMode::Mask { cutoff: 0.25 };
+        m.alpha_mode = AlphaMode::Mask { cutoff: 0.25 };
         m.double_sided = true;
         let material = b.add_material(&m).unwrap();
         let positions = [
@@ -685,12 +659,17 @@ mod tests {
         assert!(q.normals.iter().all(|n| (*n - Vec3::Z).length() < 1e-6));
         let mat = &geom.materials[q.material as usize];
         assert_eq!(mat.base_color, [0.5, 1.0, 1.0, 1.0]);
-        assert_eq!(mat.alpha_mode, AlphaMode::Mask(0.25));
+        assert_eq!(mat.alpha_mode, AlphaMode::Mask { cutoff: 0.25 });
         assert!(mat.double_sided);
+        assert_eq!(
+            (mat.name.as_str(), mat.metallic, mat.roughness),
+            ("m", 0.0, 0.9)
+        );
+        assert!(!mat.unlit);
         let t = &geom.textures[mat.base_color_texture.unwrap() as usize];
         assert_eq!((t.width, t.height), (2, 2));
         assert_eq!(t.rgba, texels);
-        assert_eq!(t.wrap_s, crate::render::raster::Wrap::ClampToEdge);
+        assert_eq!(t.wrap_s, Wrap::ClampToEdge);
     }
 
     #[test]

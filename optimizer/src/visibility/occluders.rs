@@ -39,7 +39,8 @@ use rayon::prelude::*;
 use crate::api::stats::OccluderStats;
 use crate::math::geom::Aabb;
 use crate::scene::Scene;
-use crate::scene::geometry::{AlphaMode, SceneGeometry};
+use crate::scene::geometry::SceneGeometry;
+use crate::scene::material::AlphaMode;
 
 /// Voxels along the longest axis of a component's box.
 const VOXELS: usize = 16;
