@@ -42,9 +42,11 @@ pub fn run(a: BakeArgs) -> Result<ExitCode> {
         None => MemoryParams::default(),
     };
     let p = read_placement(&a.placement)?;
+    let scene = optimizer::scene::gltf_load::load_scene_file(&a.scene)?;
     let geom = geometry::load_geometry_file(&a.scene)?;
     let start = std::time::Instant::now();
     let (glb, rep) = bake::bake(
+        &scene,
         &geom,
         &memory,
         &p,

@@ -29,7 +29,7 @@ fn committed_schemas_are_current() {
         assert_eq!(
             committed,
             std::fs::read_to_string(&p).unwrap(),
-            "schemas/{name} is stale: run `cargo run -p optimizer --bin impostor -- schema`"
+            "schemas/{name} is stale: run `cargo run --release -- schema`"
         );
     }
 }
@@ -38,7 +38,9 @@ fn committed_schemas_are_current() {
 fn fixture_jobs_conform() {
     for entry in std::fs::read_dir(root().join("fixtures/jobs")).unwrap() {
         let p = entry.unwrap().path();
-        assert_valid("job.schema.json", &read_json(&p));
+        if p.extension().is_some_and(|e| e == "json") {
+            assert_valid("job.schema.json", &read_json(&p));
+        }
     }
 }
 

@@ -13,8 +13,11 @@
 use std::time::{Duration, Instant};
 
 use serde_json::{Value, json};
-use server::client::request;
 use server::{AppState, Config, run};
+
+#[path = "../tests/common/client.rs"]
+mod client;
+use client::request;
 
 #[tokio::main(flavor = "multi_thread", worker_threads = 2)]
 async fn main() -> std::io::Result<()> {

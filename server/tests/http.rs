@@ -7,6 +7,8 @@ use std::time::{Duration, Instant};
 use serde_json::{Value, json};
 use server::{AppState, Config, run};
 
+mod common;
+
 fn job_json() -> Vec<u8> {
     std::fs::read(concat!(
         env!("CARGO_MANIFEST_DIR"),
@@ -45,7 +47,7 @@ async fn request(
     ctype: Option<&str>,
     body: &[u8],
 ) -> (u16, Vec<u8>) {
-    server::client::request(addr, method, path, ctype, body)
+    common::client::request(addr, method, path, ctype, body)
         .await
         .unwrap()
 }
@@ -107,13 +109,7 @@ async fn summary_and_glb_jobs_succeed_with_the_cli_bytes() {
     let addr = start(cfg).await;
     let glb = city(0.1);
     let scene = optimizer::scene::gltf_load::load_scene_bytes(&glb, "city").unwrap();
-    let job = optimizer::api::job::Job::from_json(&job_json(), "job").unwrap();
-    let expected = optimizer::to_json_bytes(
-        &optimizer::place::place(&scene, &job, &Default::default())
-            .unwrap()
-            .placement,
-    )
-    .unwrap();
+    let expected = common::cli_placement(&glb, &job_json());
 
     // Inline JSON scene summary.
     let body = json!({
@@ -292,20 +288,7 @@ async fn visibility_jobs_run_and_missing_inputs_are_refused() {
     ))
     .unwrap();
     // The CLI's placement of the same job.
-    let parsed = optimizer::api::job::Job::from_json(&job, "job").unwrap();
-    let input = optimizer::input::SceneInput::new(
-        optimizer::scene::gltf_load::load_scene_bytes(&glb, "city").unwrap(),
-        Some(optimizer::scene::geometry::load_geometry_bytes(&glb, "city").unwrap()),
-        None,
-        &parsed,
-    )
-    .unwrap();
-    let expected = optimizer::to_json_bytes(
-        &optimizer::place::place_input(&input, &parsed, &Default::default(), &Default::default())
-            .unwrap()
-            .placement,
-    )
-    .unwrap();
+    let expected = common::cli_placement(&glb, &job);
     let (ct, body) = multipart(&[("scene", &glb), ("job", &job)]);
     let (s, b) = request(addr, "POST", "/v1/jobs", Some(&ct), &body).await;
     assert_eq!(s, 202, "{}", String::from_utf8_lossy(&b));
@@ -372,4 +355,128 @@ async fn visibility_jobs_run_and_missing_inputs_are_refused() {
     let v = wait_final(addr, id, Duration::from_secs(120)).await;
     assert_eq!(v["state"], "succeeded", "{v}");
     assert!(v["summary"]["cpvs"].as_u64().unwrap() > 0, "{v}");
+}
+
+fn refs(v: &Value, out: &mut Vec<String>) {
+    match v {
+        Value::Object(o) => {
+            if let Some(Value::String(r)) = o.get("$ref") {
+                out.push(r.clone());
+            }
+            o.values().for_each(|x| refs(x, out));
+        }
+        Value::Array(a) => a.iter().for_each(|x| refs(x, out)),
+        _ => {}
+    }
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn openapi_documents_every_route_and_every_reference_resolves() {
+    let addr = start(Config::new(temp_dir("openapi"))).await;
+    let (s, doc) = get_json(addr, "/openapi.json").await;
+    assert_eq!(s, 200, "{doc}");
+    // Kept for reading and for external validators.
+    std::fs::write(
+        concat!(env!("CARGO_TARGET_TMPDIR"), "/openapi.json"),
+        serde_json::to_string_pretty(&doc).unwrap(),
+    )
+    .unwrap();
+    assert_eq!(doc["openapi"], "3.1.0");
+    let schemas = &doc["components"]["schemas"];
+    let mut all = Vec::new();
+    refs(&doc, &mut all);
+    assert!(all.len() > 10);
+    for r in all {
+        let name = r.strip_prefix("#/components/schemas/").expect(&r);
+        assert!(schemas.get(name).is_some(), "{r}");
+    }
+
+    let results: &[&str] = &["200", "404", "409", "500"];
+    let routes: &[(&str, &str, &[&str])] = &[
+        ("/healthz", "get", &["200"]),
+        ("/openapi.json", "get", &["200"]),
+        ("/v1/jobs", "get", &["200", "500"]),
+        (
+            "/v1/jobs",
+            "post",
+            &["202", "400", "413", "415", "422", "429", "500"],
+        ),
+        ("/v1/jobs/{id}", "get", &["200", "404", "500"]),
+        ("/v1/jobs/{id}", "delete", &["200", "404", "500"]),
+        ("/v1/jobs/{id}/placement", "get", results),
+        ("/v1/jobs/{id}/evaluation", "get", results),
+        ("/v1/jobs/{id}/impostors.glb", "get", results),
+        ("/v1/jobs/{id}/report", "get", results),
+    ];
+    for (path, method, codes) in routes {
+        let op = &doc["paths"][path][method];
+        let responses = op["responses"].as_object().expect(path);
+        let mut got: Vec<&str> = responses.keys().map(String::as_str).collect();
+        got.sort();
+        assert_eq!(&got, codes, "{method} {path}");
+        for code in codes.iter().filter(|c| c.as_bytes()[0] >= b'4') {
+            assert_eq!(
+                responses[*code]["content"]["application/json"]["schema"]["$ref"],
+                "#/components/schemas/Error",
+                "{method} {path} {code}"
+            );
+        }
+        if path.contains("{id}") {
+            assert_eq!(op["parameters"][0]["name"], "id", "{method} {path}");
+            assert_eq!(op["parameters"][0]["in"], "path", "{method} {path}");
+        }
+    }
+    assert_eq!(
+        doc["paths"].as_object().unwrap().len(),
+        8,
+        "undocumented or unknown paths"
+    );
+
+    // Bodies reference the types they are made of.
+    let schema_of = |path: &str, method: &str, code: &str, media: &str| {
+        doc["paths"][path][method]["responses"][code]["content"][media]["schema"]["$ref"].clone()
+    };
+    let json = "application/json";
+    let cases = [
+        ("/v1/jobs", "get", "200", "JobList"),
+        ("/v1/jobs", "post", "202", "Accepted"),
+        ("/v1/jobs/{id}", "get", "200", "JobStatus"),
+        ("/v1/jobs/{id}", "delete", "200", "DeleteAnswer"),
+        ("/v1/jobs/{id}/placement", "get", "200", "Placement"),
+        ("/v1/jobs/{id}/evaluation", "get", "200", "Evaluation"),
+        ("/healthz", "get", "200", "Health"),
+    ];
+    for (path, method, code, name) in cases {
+        assert_eq!(
+            schema_of(path, method, code, json),
+            format!("#/components/schemas/{name}"),
+            "{method} {path}"
+        );
+    }
+    let body = &doc["paths"]["/v1/jobs"]["post"]["requestBody"]["content"];
+    let upload = &body["multipart/form-data"]["schema"]["properties"];
+    assert_eq!(upload["job"]["$ref"], "#/components/schemas/Job");
+    assert_eq!(upload["pvs"]["$ref"], "#/components/schemas/PvsFile");
+    assert_eq!(upload["scene"]["format"], "binary");
+    let inline = body[json]["schema"]["$ref"].as_str().unwrap();
+    let inline = &schemas[inline.strip_prefix("#/components/schemas/").unwrap()];
+    assert_eq!(
+        inline["properties"]["scene"]["$ref"],
+        "#/components/schemas/SceneSummary"
+    );
+    assert_eq!(
+        schemas["JobStatus"]["properties"]["state"]["$ref"],
+        "#/components/schemas/JobState"
+    );
+    // Documented variants are listed as `oneOf` constants.
+    let states: Vec<&str> = schemas["JobState"]["oneOf"]
+        .as_array()
+        .expect("JobState is a oneOf")
+        .iter()
+        .map(|v| v["const"].as_str().unwrap())
+        .collect();
+    assert_eq!(
+        states,
+        ["queued", "running", "succeeded", "failed", "cancelled"]
+    );
 }

@@ -8,6 +8,8 @@ use std::time::{Duration, Instant};
 
 use serde_json::{Value, json};
 
+mod common;
+
 fn request(addr: SocketAddr, method: &str, path: &str, body: &[u8]) -> Option<(u16, Vec<u8>)> {
     let mut s = TcpStream::connect_timeout(&addr, Duration::from_secs(2)).ok()?;
     let ctype = if body.is_empty() {
@@ -67,13 +69,7 @@ fn kill_9_and_restart_finishes_every_job() {
         "/../fixtures/jobs/city-small.json"
     ))
     .unwrap();
-    let job = optimizer::api::job::Job::from_json(&job_bytes, "job").unwrap();
-    let expected = optimizer::to_json_bytes(
-        &optimizer::place::place(&scene, &job, &Default::default())
-            .unwrap()
-            .placement,
-    )
-    .unwrap();
+    let expected = common::cli_placement(&glb, &job_bytes);
     let body = json!({
         "scene": serde_json::to_value(scene.summary()).unwrap(),
         "job": serde_json::from_slice::<Value>(&job_bytes).unwrap(),

@@ -26,8 +26,10 @@ use serde_json::json;
 
 use crate::api::job::MemoryParams;
 use crate::api::placement::{PlacedImpostor, Placement};
+use crate::input::Prepared;
 use crate::model::layers::slabs;
 use crate::render::raster::{Raster, Surface, TextureRef, Vertex, View};
+use crate::scene::Scene;
 use crate::scene::geometry::SceneGeometry;
 use crate::scene::glb::{self, GlbBuilder, MeshPrimitive, MinFilter, Node, Sampler, object_extras};
 use crate::scene::material::{AlphaMode, Material};
@@ -96,41 +98,17 @@ pub(crate) struct Tri {
     pub(crate) material: u32,
 }
 
-/// Checks that the placement's object ids exist in the geometry.
-fn check_objects(geom: &SceneGeometry, placement: &Placement, source: &str) -> Result<()> {
-    let count = geom.object_count();
-    for imp in &placement.impostors {
-        if let Some(&o) = imp.objects.iter().find(|&&o| o as usize >= count) {
-            return Err(Error::bad(
-                format!("{source}: impostors[{}].objects", imp.id),
-                format!(
-                    "object id {o} is not in the scene ({count} objects): the placement was made for another scene"
-                ),
-            ));
-        }
-        if imp.layers == 0 || imp.resolution == 0 || imp.resolution > 16384 {
-            return Err(Error::bad(
-                format!("{source}: impostors[{}]", imp.id),
-                format!(
-                    "layers {} and resolution {} must be positive (resolution at most 16384)",
-                    imp.layers, imp.resolution
-                ),
-            ));
-        }
-        if !(imp.sphere.radius.is_finite() && imp.sphere.radius > 0.0) {
-            return Err(Error::bad(
-                format!("{source}: impostors[{}].sphere.radius", imp.id),
-                "must be positive and finite",
-            ));
-        }
-        if let Err((field, problem)) = imp.check_view_cell() {
-            return Err(Error::bad(
-                format!("{source}: impostors[{}].{field}", imp.id),
-                problem,
-            ));
-        }
+/// Checks `placement` against `scene` ([`Placement::validate`], the same
+/// rules as the evaluation) and that `geom` is the same scene's geometry.
+fn check(scene: &Scene, geom: &SceneGeometry, placement: &Placement, source: &str) -> Result<()> {
+    if geom.object_count() != scene.objects.len() {
+        return Err(Error::Internal(format!(
+            "bake: the geometry has {} objects, the scene {}",
+            geom.object_count(),
+            scene.objects.len()
+        )));
     }
-    Ok(())
+    placement.validate(scene, source)
 }
 
 /// World-space triangles of the given objects.
@@ -392,11 +370,12 @@ pub fn encode_png(rgba: &[u8], w: u32, h: u32) -> Result<Vec<u8>> {
 /// layer order; layers without a covered texel are left out), in parallel
 /// across impostors. `source` names the placement in errors.
 pub fn render_layers(
+    scene: &Scene,
     geom: &SceneGeometry,
     placement: &Placement,
     source: &str,
 ) -> Result<Vec<Layer>> {
-    check_objects(geom, placement, source)?;
+    check(scene, geom, placement, source)?;
     let by_object = geom_objects(geom);
     Ok(placement
         .impostors
@@ -509,16 +488,19 @@ pub(crate) fn geom_objects(geom: &SceneGeometry) -> Vec<Vec<u32>> {
     by_object
 }
 
-/// Bakes every impostor of `placement` over `geom` into a GLB.
+/// Bakes every impostor of `placement` over `geom` (the geometry of
+/// `scene`) into a GLB. The placement is checked first by
+/// [`Placement::validate`].
 /// `source` names the placement in errors.
 pub fn bake(
+    scene: &Scene,
     geom: &SceneGeometry,
     memory: &MemoryParams,
     placement: &Placement,
     opts: &BakeOptions,
     source: &str,
 ) -> Result<(Vec<u8>, BakeReport)> {
-    let layers = render_layers(geom, placement, source)?;
+    let layers = render_layers(scene, geom, placement, source)?;
 
     let sizes: Vec<u32> = layers.iter().map(|l| l.res).collect();
     let (slots, atlas_sizes) = pack(&sizes, opts.atlas_size, opts.gutter);
@@ -622,6 +604,33 @@ pub fn bake(
     Ok((b.finish(), report))
 }
 
+impl Prepared<'_> {
+    /// Bakes `placement` (made for this scene) with the job's memory model.
+    /// Needs the scene's geometry ([`GeometryUse::Required`](crate::input::GeometryUse)).
+    pub fn bake(
+        &self,
+        placement: &Placement,
+        opts: &BakeOptions,
+        source: &str,
+    ) -> Result<(Vec<u8>, BakeReport)> {
+        let input = self.input();
+        let geom = input.geometry.as_ref().ok_or_else(|| {
+            Error::bad(
+                source,
+                "baking needs the scene's geometry (a .glb/.gltf scene, not a summary)",
+            )
+        })?;
+        bake(
+            &input.scene,
+            geom,
+            &self.job().memory,
+            placement,
+            opts,
+            source,
+        )
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -682,7 +691,12 @@ mod tests {
         let mut m = Material::new("atlas", [1.0; 4]);
         m.base_color_texture = Some(texture);
         let material = b.add_material(&m).unwrap();
-        let positions = [[0.0, 1.0, 0.0], [0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [1.0, 1.0, 0.0]];
+        let positions = [
+            [0.0, 1.0, 0.0],
+            [0.0, 0.0, 0.0],
+            [1.0, 0.0, 0.0],
+            [1.0, 1.0, 0.0],
+        ];
         let mesh = b
             .add_mesh_from(
                 "impostor 0",

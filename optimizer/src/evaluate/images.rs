@@ -413,7 +413,9 @@ impl Prepared<'_> {
             )
         })?;
         let layers = match layers {
-            LayerSource::Bake => crate::bake::render_layers(geom, placement, source)?,
+            LayerSource::Bake => {
+                crate::bake::render_layers(&self.input().scene, geom, placement, source)?
+            }
             LayerSource::Glb { bytes, name } => crate::bake::read_layers(bytes, name)?,
         };
         image_error(geom, self.job(), placement, &layers, opts)

@@ -438,18 +438,11 @@ pub fn run(
     } else {
         None
     };
-    let (lo, hi) = input.scene.bounds();
     Ok(Report {
         version: crate::VERSION.into(),
         created: now_rfc3339(),
         machine: machine(),
-        scene: SceneInfo {
-            name: name.into(),
-            objects: input.scene.objects.len() as u64,
-            triangles: input.scene.total_triangles(),
-            min: lo.to_array(),
-            max: hi.to_array(),
-        },
+        scene: scene_info(name, input),
         job: job_text.clone(),
         methods: opts.methods.iter().map(|m| m.name().into()).collect(),
         sweeps: opts.sweeps.clone(),
@@ -457,6 +450,47 @@ pub fn run(
         walkthroughs,
         stability,
     })
+}
+
+fn scene_info(name: &str, input: &SceneInput) -> SceneInfo {
+    let (lo, hi) = input.scene.bounds();
+    SceneInfo {
+        name: name.into(),
+        objects: input.scene.objects.len() as u64,
+        triangles: input.scene.total_triangles(),
+        min: lo.to_array(),
+        max: hi.to_array(),
+    }
+}
+
+/// The report of a single run (one job of the HTTP service): its run, its
+/// evaluation and its walkthrough when `out` has one.
+pub fn single_run_report(
+    name: &str,
+    input: &SceneInput,
+    job_text: &Value,
+    out: &RunOutput,
+) -> Report {
+    Report {
+        version: crate::VERSION.into(),
+        created: now_rfc3339(),
+        machine: machine(),
+        scene: scene_info(name, input),
+        job: job_text.clone(),
+        methods: vec![out.run.method.clone()],
+        sweeps: Vec::new(),
+        runs: vec![out.run.clone()],
+        walkthroughs: out
+            .frames
+            .iter()
+            .map(|frames| Walkthrough {
+                method: out.run.method.clone(),
+                target_frame_time_ms: out.run.target_frame_time_ms,
+                frame_ms: frames.clone(),
+            })
+            .collect(),
+        stability: None,
+    }
 }
 
 #[cfg(test)]

@@ -94,7 +94,6 @@ impl GlbBuilder {
         if !node.extensions.is_empty() {
             n.extensions = Some(gj::extensions::scene::Node {
                 others: node.extensions,
-                ..Default::default()
             });
         }
         for l in levels {

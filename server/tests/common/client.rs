@@ -1,4 +1,4 @@
-//! A minimal HTTP/1.1 client for the tests and the load script (loopback
+//! A minimal HTTP/1.1 client for the tests and the load example (loopback
 //! only; one request per connection).
 
 use std::net::SocketAddr;

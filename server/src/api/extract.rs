@@ -1,0 +1,263 @@
+//! Request extractors of the job routes: [`JobId`] (the `{id}` path
+//! parameter) and [`Submission`] (the body of `POST /v1/jobs`, multipart or
+//! JSON). Each describes its part of the request in the OpenAPI document.
+
+use aide::generate::GenContext;
+use aide::openapi::{MediaType, Operation, RequestBody, Response, SchemaObject, StatusCode};
+use aide::operation::{OperationInput, OperationOutput, set_body};
+use axum::body::Bytes;
+use axum::extract::rejection::PathRejection;
+use axum::extract::{FromRequest, FromRequestParts, Multipart, Path, Request};
+use axum::http::{StatusCode as HttpStatus, header, request::Parts};
+use schemars::JsonSchema;
+use serde::Deserialize;
+use serde_json::Value;
+
+use optimizer::api::job::Job;
+use optimizer::api::pvs::PvsFile;
+use optimizer::api::scene::SceneSummary;
+
+use crate::error::ApiError;
+
+/// The `{id}` of a job route.
+pub struct JobId(pub i64);
+
+/// The documented shape of the `{id}` path parameter; only its schema is
+/// used, as [`JobId`] reads the parameter with the same rules as
+/// `Path<i64>` (and answers with the same rejections).
+#[derive(JsonSchema)]
+#[schemars(inline)]
+struct JobIdParam {
+    /// The job's id.
+    #[allow(dead_code)]
+    id: i64,
+}
+
+impl<S: Send + Sync> FromRequestParts<S> for JobId {
+    type Rejection = PathRejection;
+
+    async fn from_request_parts(parts: &mut Parts, state: &S) -> Result<Self, Self::Rejection> {
+        let Path(id) = Path::<i64>::from_request_parts(parts, state).await?;
+        Ok(JobId(id))
+    }
+}
+
+impl OperationInput for JobId {
+    fn operation_input(ctx: &mut GenContext, operation: &mut Operation) {
+        Path::<JobIdParam>::operation_input(ctx, operation);
+    }
+}
+
+/// A job submission: the scene (a GLB, glTF JSON or scene summary), the job
+/// JSON, an optional PVS file and whether to bake the impostors.
+pub struct Submission {
+    /// The scene's bytes.
+    pub scene: Vec<u8>,
+    /// The job's JSON.
+    pub job: Vec<u8>,
+    /// The PVS file's JSON, for visibility `precomputed`.
+    pub pvs: Option<Vec<u8>>,
+    /// Whether to bake the impostors after the placement.
+    pub bake: bool,
+}
+
+/// The JSON submission body: a scene summary inline.
+#[derive(Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+#[schemars(rename = "Submission")]
+struct JsonSubmission {
+    /// The scene summary.
+    #[schemars(with = "SceneSummary")]
+    scene: Value,
+    /// The job.
+    #[schemars(with = "Job")]
+    job: Value,
+    /// A PVS file, for visibility `precomputed`.
+    #[serde(default)]
+    #[schemars(with = "Option<PvsFile>")]
+    pvs: Option<Value>,
+    /// Also bake the impostors (`impostors.glb`).
+    #[serde(default)]
+    bake: bool,
+}
+
+/// A multipart error's status: 413 when the body is over the limit, 400
+/// otherwise.
+fn multipart_status(status: HttpStatus) -> HttpStatus {
+    if status == HttpStatus::PAYLOAD_TOO_LARGE {
+        HttpStatus::PAYLOAD_TOO_LARGE
+    } else {
+        HttpStatus::BAD_REQUEST
+    }
+}
+
+impl Submission {
+    async fn from_multipart(mut mp: Multipart) -> Result<Self, ApiError> {
+        let (mut scene, mut job, mut pvs, mut bake) = (None, None, None, false);
+        loop {
+            let field = mp.next_field().await.map_err(|e| {
+                ApiError::new(
+                    multipart_status(e.status()),
+                    format!("bad multipart body: {}", e.body_text()),
+                )
+            })?;
+            let Some(field) = field else { break };
+            let name = field.name().unwrap_or("").to_string();
+            let data = field.bytes().await.map_err(|e| {
+                ApiError::new(
+                    multipart_status(e.status()),
+                    format!("multipart part `{name}`: {}", e.body_text()),
+                )
+            })?;
+            match name.as_str() {
+                "scene" => scene = Some(data),
+                "job" => job = Some(data),
+                "pvs" => pvs = Some(data),
+                "bake" => bake = data.as_ref() == b"true",
+                other => {
+                    return Err(ApiError::new(
+                        HttpStatus::BAD_REQUEST,
+                        format!(
+                            "unknown multipart part `{other}` (expected scene, job, pvs, bake)"
+                        ),
+                    ));
+                }
+            }
+        }
+        let missing = |part: &str| {
+            ApiError::new(
+                HttpStatus::BAD_REQUEST,
+                format!("multipart part `{part}` is missing"),
+            )
+        };
+        let scene = scene.ok_or_else(|| missing("scene"))?;
+        let job = job.ok_or_else(|| missing("job"))?;
+        Ok(Submission {
+            scene: scene.to_vec(),
+            job: job.to_vec(),
+            pvs: pvs.map(|p| p.to_vec()),
+            bake,
+        })
+    }
+
+    fn from_json(body: &[u8]) -> Result<Self, ApiError> {
+        let sub: JsonSubmission = serde_json::from_slice(body).map_err(|e| {
+            ApiError::new(
+                HttpStatus::BAD_REQUEST,
+                format!("body must be {{\"scene\": <scene summary>, \"job\": <job>}}: {e}"),
+            )
+        })?;
+        Ok(Submission {
+            scene: serde_json::to_vec(&sub.scene).map_err(ApiError::internal)?,
+            job: serde_json::to_vec(&sub.job).map_err(ApiError::internal)?,
+            pvs: match &sub.pvs {
+                Some(p) => Some(serde_json::to_vec(p).map_err(ApiError::internal)?),
+                None => None,
+            },
+            bake: sub.bake,
+        })
+    }
+}
+
+impl<S: Send + Sync> FromRequest<S> for Submission {
+    type Rejection = ApiError;
+
+    async fn from_request(req: Request, state: &S) -> Result<Self, ApiError> {
+        let ctype = req
+            .headers()
+            .get(header::CONTENT_TYPE)
+            .and_then(|v| v.to_str().ok())
+            .unwrap_or("")
+            .to_ascii_lowercase();
+        if ctype.starts_with("multipart/form-data") {
+            let mp = Multipart::from_request(req, state).await.map_err(|e| {
+                ApiError::new(HttpStatus::BAD_REQUEST, format!("bad multipart body: {e}"))
+            })?;
+            Submission::from_multipart(mp).await
+        } else if ctype.starts_with("application/json") {
+            let body = Bytes::from_request(req, state).await.map_err(|e| {
+                ApiError::new(e.status(), format!("request body: {}", e.body_text()))
+            })?;
+            Submission::from_json(&body)
+        } else {
+            Err(ApiError::new(
+                HttpStatus::UNSUPPORTED_MEDIA_TYPE,
+                "use multipart/form-data (parts `scene`, `job`) or application/json",
+            ))
+        }
+    }
+}
+
+impl OperationInput for Submission {
+    fn operation_input(ctx: &mut GenContext, operation: &mut Operation) {
+        let described = |mut schema: schemars::Schema, description: &str| {
+            schema.insert("description".into(), description.into());
+            schema
+        };
+        let job = described(
+            ctx.schema.subschema_for::<Job>(),
+            "the job (JSON, as `impostor place` reads it)",
+        );
+        let pvs = described(
+            ctx.schema.subschema_for::<PvsFile>(),
+            "a PVS file, for visibility \"precomputed\"",
+        );
+        let multipart = schemars::json_schema!({
+            "type": "object",
+            "required": ["scene", "job"],
+            "properties": {
+                "scene": {
+                    "type": "string",
+                    "format": "binary",
+                    "description": "the scene: a GLB (or glTF JSON, or a scene summary)"
+                },
+                "job": job,
+                "pvs": pvs,
+                "bake": {
+                    "type": "string",
+                    "enum": ["true", "false"],
+                    "description": "\"true\" to also bake the impostors (`impostors.glb`)"
+                }
+            }
+        });
+        let json = ctx.schema.subschema_for::<JsonSubmission>();
+        let media = |json_schema| MediaType {
+            schema: Some(SchemaObject {
+                json_schema,
+                example: None,
+                external_docs: None,
+            }),
+            ..MediaType::default()
+        };
+        let mut body = RequestBody {
+            description: Some("a GLB upload (multipart) or an inline scene summary (JSON)".into()),
+            required: true,
+            ..RequestBody::default()
+        };
+        body.content
+            .insert("multipart/form-data".into(), media(multipart));
+        body.content.insert("application/json".into(), media(json));
+        set_body(ctx, operation, body);
+    }
+
+    fn inferred_early_responses(
+        ctx: &mut GenContext,
+        operation: &mut Operation,
+    ) -> Vec<(Option<StatusCode>, Response)> {
+        [
+            (
+                400,
+                "a malformed body: bad multipart or JSON, a missing or unknown part",
+            ),
+            (413, "the body is larger than the upload limit"),
+            (415, "neither multipart/form-data nor application/json"),
+        ]
+        .into_iter()
+        .filter_map(|(code, description)| {
+            let mut r = ApiError::operation_response(ctx, operation)?;
+            r.description = description.into();
+            Some((Some(StatusCode::Code(code)), r))
+        })
+        .collect()
+    }
+}

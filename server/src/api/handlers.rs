@@ -1,0 +1,238 @@
+//! The route handlers: submit, list, status, results and delete of jobs;
+//! health and the OpenAPI document.
+
+use axum::Json;
+use axum::extract::{Extension, Query, State};
+use axum::http::StatusCode;
+use schemars::JsonSchema;
+use serde::Deserialize;
+
+use optimizer::api::evaluation::Evaluation;
+use optimizer::api::placement::Placement;
+
+use super::bodies::{Glb, HtmlPage, OpenApiJson, StoredJson};
+use super::extract::{JobId, Submission};
+use super::types::{Accepted, DeleteAnswer, DeleteOutcome, Health, JobList, JobStatus};
+use crate::error::ApiError;
+use crate::job::{CANCELLED_BY_REQUEST, JobState};
+use crate::pipeline::check_submission;
+use crate::{AppState, OPTIMIZER_VERSION};
+
+/// `POST /v1/jobs`: checks and stores a submission, then queues it.
+pub(crate) async fn submit(
+    State(st): State<AppState>,
+    sub: Submission,
+) -> Result<Accepted, ApiError> {
+    // Parsing the scene and writing the files is blocking work.
+    let id = tokio::task::spawn_blocking(move || accept(&st, sub))
+        .await
+        .map_err(ApiError::internal)??;
+    Ok(Accepted {
+        id,
+        state: JobState::Queued,
+    })
+}
+
+/// Checks, stores and queues a submission. Returns the new job's id.
+fn accept(st: &AppState, sub: Submission) -> Result<i64, ApiError> {
+    check_submission(&sub.scene, &sub.job, sub.pvs.as_deref(), sub.bake)?;
+    let max_queue = st.0.cfg.max_queue;
+    if st.0.queue.waiting() >= max_queue {
+        return Err(ApiError::new(
+            StatusCode::TOO_MANY_REQUESTS,
+            format!("the queue is full ({max_queue} jobs waiting)"),
+        ));
+    }
+    let id =
+        st.0.store
+            .create(&sub.scene, &sub.job, sub.pvs.as_deref(), sub.bake)
+            .map_err(ApiError::internal)?;
+    tracing::info!(job = id, "accepted");
+    st.0.queue.push(id);
+    Ok(id)
+}
+
+/// The state of job `id`; 404 when there is no such job.
+fn job_state(st: &AppState, id: i64) -> Result<JobState, ApiError> {
+    Ok(st
+        .0
+        .store
+        .row(id)
+        .map_err(ApiError::internal)?
+        .ok_or_else(|| ApiError::no_job(id))?
+        .state)
+}
+
+/// The status of job `id`: its row, with the live stage and progress while
+/// it runs.
+fn job_status(st: &AppState, id: i64) -> Result<JobStatus, ApiError> {
+    let row =
+        st.0.store
+            .row(id)
+            .map_err(ApiError::internal)?
+            .ok_or_else(|| ApiError::no_job(id))?;
+    let (stage, progress) = match st.0.live.progress(id) {
+        Some((stage, progress)) => (Some(stage), progress),
+        None => (
+            row.stage,
+            if row.state == JobState::Succeeded {
+                1.0
+            } else {
+                0.0
+            },
+        ),
+    };
+    Ok(JobStatus {
+        bake: row.bake,
+        created_ms: row.created_ms,
+        error: row.error,
+        finished_ms: row.finished_ms,
+        id,
+        progress,
+        stage,
+        started_ms: row.started_ms,
+        state: row.state,
+        summary: row.summary.and_then(|s| serde_json::from_str(&s).ok()),
+    })
+}
+
+/// `GET /v1/jobs/{id}`.
+pub(crate) async fn status(
+    State(st): State<AppState>,
+    JobId(id): JobId,
+) -> Result<Json<JobStatus>, ApiError> {
+    Ok(Json(job_status(&st, id)?))
+}
+
+/// The query of `GET /v1/jobs`.
+#[derive(Deserialize, JsonSchema)]
+#[schemars(inline)]
+pub(crate) struct ListQuery {
+    /// List the jobs with an id greater than this.
+    #[serde(default)]
+    after: i64,
+    /// Jobs per page, clamped to 1..=500.
+    #[serde(default = "default_limit")]
+    limit: i64,
+}
+
+fn default_limit() -> i64 {
+    50
+}
+
+/// `GET /v1/jobs`: a page of jobs, oldest first.
+pub(crate) async fn list(
+    State(st): State<AppState>,
+    Query(q): Query<ListQuery>,
+) -> Result<Json<JobList>, ApiError> {
+    let limit = q.limit.clamp(1, 500);
+    let ids =
+        st.0.store
+            .ids_after(q.after, limit)
+            .map_err(ApiError::internal)?;
+    // A job deleted between the two reads is left out of the page.
+    let jobs = ids
+        .iter()
+        .filter_map(|&id| job_status(&st, id).ok())
+        .collect();
+    let next_after = (ids.len() as i64 == limit)
+        .then(|| ids.last().copied())
+        .flatten();
+    Ok(Json(JobList { jobs, next_after }))
+}
+
+/// The bytes of result `file` of job `id`: 409 until the job has
+/// succeeded, 404 when the job has no such file.
+async fn result_file(st: &AppState, id: i64, file: &str) -> Result<Vec<u8>, ApiError> {
+    let state = job_state(st, id)?;
+    if state != JobState::Succeeded {
+        return Err(ApiError::new(
+            StatusCode::CONFLICT,
+            format!("job {id} is {state}; results exist once it has succeeded"),
+        ));
+    }
+    match tokio::fs::read(st.0.store.job_dir(id).join(file)).await {
+        Ok(bytes) => Ok(bytes),
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => Err(ApiError::new(
+            StatusCode::NOT_FOUND,
+            format!(
+                "job {id} has no {file} (impostors are baked only when the job asks for it with \"bake\": true)"
+            ),
+        )),
+        Err(e) => Err(ApiError::internal(e)),
+    }
+}
+
+/// `GET /v1/jobs/{id}/placement`.
+pub(crate) async fn placement(
+    State(st): State<AppState>,
+    JobId(id): JobId,
+) -> Result<StoredJson<Placement>, ApiError> {
+    Ok(StoredJson::new(
+        result_file(&st, id, "placement.json").await?,
+    ))
+}
+
+/// `GET /v1/jobs/{id}/evaluation`.
+pub(crate) async fn evaluation(
+    State(st): State<AppState>,
+    JobId(id): JobId,
+) -> Result<StoredJson<Evaluation>, ApiError> {
+    Ok(StoredJson::new(
+        result_file(&st, id, "evaluation.json").await?,
+    ))
+}
+
+/// `GET /v1/jobs/{id}/impostors.glb`.
+pub(crate) async fn impostors(
+    State(st): State<AppState>,
+    JobId(id): JobId,
+) -> Result<Glb, ApiError> {
+    Ok(Glb(result_file(&st, id, "impostors.glb").await?))
+}
+
+/// `GET /v1/jobs/{id}/report`.
+pub(crate) async fn report(
+    State(st): State<AppState>,
+    JobId(id): JobId,
+) -> Result<HtmlPage, ApiError> {
+    Ok(HtmlPage(result_file(&st, id, "report.html").await?))
+}
+
+/// `DELETE /v1/jobs/{id}`: cancels a queued job, asks a running one to
+/// stop, deletes a finished one with its files.
+pub(crate) async fn delete(
+    State(st): State<AppState>,
+    JobId(id): JobId,
+) -> Result<Json<DeleteAnswer>, ApiError> {
+    let outcome = match job_state(&st, id)? {
+        JobState::Queued => {
+            // The worker skips a job that is no longer queued.
+            st.0.store
+                .set_state(id, JobState::Cancelled, Some(CANCELLED_BY_REQUEST), None);
+            DeleteOutcome::Cancelled
+        }
+        JobState::Running => {
+            st.0.live.cancel(id);
+            DeleteOutcome::Cancelling
+        }
+        JobState::Succeeded | JobState::Failed | JobState::Cancelled => {
+            st.0.store.delete(id).map_err(ApiError::internal)?;
+            DeleteOutcome::Deleted
+        }
+    };
+    Ok(Json(DeleteAnswer { id, state: outcome }))
+}
+
+/// `GET /healthz`.
+pub(crate) async fn healthz() -> Json<Health> {
+    Json(Health {
+        status: "ok",
+        version: OPTIMIZER_VERSION,
+    })
+}
+
+/// `GET /openapi.json`.
+pub(crate) async fn openapi(Extension(doc): Extension<OpenApiJson>) -> OpenApiJson {
+    doc
+}

@@ -1,0 +1,180 @@
+//! The one module that calls the optimizer's job API: it checks a
+//! submission before it is accepted, and runs an accepted job (place,
+//! evaluate, report, bake) from the files in its directory.
+
+use std::path::{Path, PathBuf};
+use std::sync::atomic::AtomicBool;
+
+use axum::http::StatusCode;
+use serde_json::Value;
+
+use optimizer::api::job::{Job, VisibilityMode};
+use optimizer::control::{Control, Event};
+use optimizer::evaluate::EvalOptions;
+use optimizer::input::{GeometryUse, Load, SceneInput, Source};
+use optimizer::report::render::render_html;
+use optimizer::report::run::{place_and_evaluate, single_run_report};
+
+use crate::api::types::JobSummary;
+use crate::error::ApiError;
+use crate::store::write_atomic;
+
+/// Checks that a submission can run: the job and the scene parse, the
+/// scene has geometry where the job or baking needs it, and a PVS file is
+/// given (and fits the scene) when the job asks for precomputed visibility.
+/// Bad input is answered with 422.
+pub(crate) fn check_submission(
+    scene: &[u8],
+    job: &[u8],
+    pvs: Option<&[u8]>,
+    bake: bool,
+) -> Result<(), ApiError> {
+    let unprocessable = |e: optimizer::Error| {
+        if e.is_bad_input() {
+            ApiError::new(StatusCode::UNPROCESSABLE_ENTITY, e.to_string())
+        } else {
+            ApiError::internal(e)
+        }
+    };
+    let parsed = Job::from_json(job, "job").map_err(unprocessable)?;
+    let objects = optimizer::scene::gltf_load::load_scene_bytes(scene, "scene")
+        .map_err(unprocessable)?
+        .objects
+        .len();
+    if optimizer::input::needs_geometry(&parsed) && !scene.starts_with(b"glTF") {
+        // A summary (or glTF JSON): check it has geometry at all.
+        optimizer::scene::geometry::load_geometry_bytes(scene, "scene").map_err(|e| {
+            ApiError::new(
+                StatusCode::UNPROCESSABLE_ENTITY,
+                format!("the job's visibility or lod.generate needs the scene's geometry: {e}"),
+            )
+        })?;
+    }
+    match (parsed.visibility.mode, pvs) {
+        (VisibilityMode::Precomputed, None) => {
+            return Err(ApiError::new(
+                StatusCode::UNPROCESSABLE_ENTITY,
+                "job: visibility \"precomputed\" needs a `pvs` part (a PVS file)",
+            ));
+        }
+        (_, Some(bytes)) => {
+            optimizer::api::pvs::PvsFile::from_json(bytes, "pvs")
+                .and_then(|f| f.check(objects, "pvs"))
+                .map_err(unprocessable)?;
+        }
+        _ => {}
+    }
+    if bake && !scene.starts_with(b"glTF") && scene.first() == Some(&b'{') {
+        // A summary (or glTF JSON); baking needs geometry.
+        optimizer::scene::geometry::load_geometry_bytes(scene, "scene").map_err(unprocessable)?;
+    }
+    Ok(())
+}
+
+/// What a run needs besides the job's files.
+pub(crate) struct RunOptions<'a> {
+    /// Whether to bake the impostors after the placement.
+    pub bake: bool,
+    /// Views of the evaluation (uniform, and again inside problem views).
+    pub eval_views: u64,
+    /// Set to stop the run at its next check.
+    pub cancel: &'a AtomicBool,
+    /// Called with the stage name and the fraction of the run done.
+    pub progress: &'a (dyn Fn(&str, f64) + Sync),
+}
+
+/// Runs the job stored in `dir` (`scene`, `job.json`, optional `pvs.json`)
+/// and writes its results there, each atomically: `placement.json`,
+/// `report.html`, `evaluation.json` and, when baking, `impostors.glb`.
+/// Returns the JSON text of the job's [`JobSummary`].
+pub(crate) fn run_job(dir: &Path, opts: &RunOptions<'_>) -> optimizer::Result<String> {
+    let io = |p: PathBuf| move |e| optimizer::Error::io(p, e);
+    let scene_bytes = std::fs::read(dir.join("scene")).map_err(io(dir.join("scene")))?;
+    let job_bytes = std::fs::read(dir.join("job.json")).map_err(io(dir.join("job.json")))?;
+    let pvs_path = dir.join("pvs.json");
+    let pvs_bytes = if pvs_path.exists() {
+        Some(std::fs::read(&pvs_path).map_err(io(pvs_path.clone()))?)
+    } else {
+        None
+    };
+    let job = Job::from_json(&job_bytes, "job")?;
+    // Geometry when the job needs it, for the evaluation's check of the
+    // visible sets when the scene has any, and always when baking.
+    let load = Load::new(
+        Source::Bytes {
+            bytes: &scene_bytes,
+            name: "scene",
+        },
+        if opts.bake {
+            GeometryUse::Required
+        } else {
+            GeometryUse::ForChecks
+        },
+    )
+    .with_pvs(
+        pvs_bytes
+            .as_deref()
+            .map(|bytes| Source::Bytes { bytes, name: "pvs" }),
+    );
+    let input = SceneInput::load(&load, &job, "job")?;
+    drop(scene_bytes);
+    let prepared = input.prepare(&job, "job")?;
+    let observer = |e: Event<'_>| {
+        if let Event::Progress {
+            stage, fraction, ..
+        } = e
+        {
+            (opts.progress)(stage, fraction);
+        }
+    };
+    let ctl = Control {
+        cancel: Some(opts.cancel),
+        observer: Some(&observer),
+    };
+    let eval = EvalOptions {
+        views: opts.eval_views,
+        cpv_views: opts.eval_views,
+        seed: 1,
+        ..EvalOptions::default()
+    };
+    let out = place_and_evaluate(&prepared, &eval, true, &ctl)?;
+    ctl.check()?;
+    write_atomic(
+        &dir.join("placement.json"),
+        &optimizer::to_json_bytes(&out.place.placement)?,
+    )
+    .map_err(io(dir.join("placement.json")))?;
+    let job_text: Value = serde_json::from_slice(&job_bytes).unwrap_or(Value::Null);
+    let report = single_run_report("scene", &input, &job_text, &out);
+    write_atomic(&dir.join("report.html"), render_html(&report).as_bytes())
+        .map_err(io(dir.join("report.html")))?;
+    write_atomic(
+        &dir.join("evaluation.json"),
+        &optimizer::to_json_bytes(&out.eval)?,
+    )
+    .map_err(io(dir.join("evaluation.json")))?;
+    if opts.bake {
+        ctl.check()?;
+        ctl.progress("bake", 0.99, "baking the impostors");
+        let (glb, _) = prepared.bake(
+            &out.place.placement,
+            &optimizer::bake::BakeOptions::default(),
+            "placement",
+        )?;
+        write_atomic(&dir.join("impostors.glb"), &glb).map_err(io(dir.join("impostors.glb")))?;
+    }
+    let summary = JobSummary {
+        placement: out.place.placement.summary.clone(),
+        max_ms: out.eval.max_ms,
+        violations_in_solved: out.eval.violations_in_solved,
+        violations_in_cpv_views: out.eval.violations_in_cpv_views,
+        control_violations_in_solved: out.eval.control.violations_in_solved,
+        parallax_max_px: out.eval.parallax.as_ref().map(|x| x.max_px),
+        seconds: out.place.stats.seconds.clone(),
+    };
+    // Through a JSON value, whose keys are sorted: the stored text lists
+    // the fields in the same order as the status answer does.
+    serde_json::to_value(&summary)
+        .map(|v| v.to_string())
+        .map_err(|e| optimizer::Error::Internal(e.to_string()))
+}

@@ -1,0 +1,249 @@
+//! Durable job storage: the SQLite database (`jobs.sqlite`: WAL,
+//! `synchronous = FULL`) and one directory of files per job, written
+//! atomically. Also recovers the jobs a previous process left unfinished.
+
+use std::io;
+use std::path::{Path, PathBuf};
+use std::sync::{Mutex, MutexGuard};
+use std::time::{SystemTime, UNIX_EPOCH};
+
+use rusqlite::Connection;
+
+use crate::job::JobState;
+
+/// The job database and the job directories under `<data_dir>/jobs/`.
+pub(crate) struct Store {
+    db: Mutex<Connection>,
+    jobs_dir: PathBuf,
+}
+
+/// One row of the `jobs` table.
+pub(crate) struct JobRow {
+    pub state: JobState,
+    /// The last stage recorded (the live stage of a running job is kept in
+    /// memory, not here).
+    pub stage: Option<String>,
+    pub error: Option<String>,
+    /// The JSON text of the job's summary, once succeeded.
+    pub summary: Option<String>,
+    pub bake: bool,
+    pub created_ms: i64,
+    pub started_ms: Option<i64>,
+    pub finished_ms: Option<i64>,
+}
+
+/// Milliseconds since the Unix epoch.
+fn now_ms() -> i64 {
+    SystemTime::now()
+        .duration_since(UNIX_EPOCH)
+        .map_or(0, |d| d.as_millis() as i64)
+}
+
+fn db_err(e: rusqlite::Error) -> io::Error {
+    io::Error::other(e)
+}
+
+/// Writes `bytes` to `path` atomically: temporary file, sync, rename, sync
+/// of the directory. A crash leaves either the old file or the whole new
+/// one, never a truncated result.
+pub(crate) fn write_atomic(path: &Path, bytes: &[u8]) -> io::Result<()> {
+    use std::io::Write;
+    let tmp = path.with_extension("tmp");
+    {
+        let mut f = std::fs::File::create(&tmp)?;
+        f.write_all(bytes)?;
+        f.sync_all()?;
+    }
+    std::fs::rename(&tmp, path)?;
+    if let Some(dir) = path.parent()
+        && let Ok(d) = std::fs::File::open(dir)
+    {
+        let _ = d.sync_all();
+    }
+    Ok(())
+}
+
+impl Store {
+    /// Opens (or creates) the database and the job directory under
+    /// `data_dir`, creating the tables a new database lacks.
+    pub fn open(data_dir: &Path) -> io::Result<Store> {
+        let jobs_dir = data_dir.join("jobs");
+        std::fs::create_dir_all(&jobs_dir)?;
+        let db = Connection::open(data_dir.join("jobs.sqlite")).map_err(db_err)?;
+        db.execute_batch(
+            "PRAGMA journal_mode = WAL;
+             PRAGMA synchronous = FULL;
+             CREATE TABLE IF NOT EXISTS jobs (
+                 id INTEGER PRIMARY KEY,
+                 state TEXT NOT NULL,
+                 stage TEXT,
+                 error TEXT,
+                 summary TEXT,
+                 bake INTEGER NOT NULL,
+                 scene_kind TEXT NOT NULL,
+                 created_ms INTEGER NOT NULL,
+                 started_ms INTEGER,
+                 finished_ms INTEGER
+             );
+             CREATE TABLE IF NOT EXISTS meta (k TEXT PRIMARY KEY, v INTEGER NOT NULL);",
+        )
+        .map_err(db_err)?;
+        Ok(Store {
+            db: Mutex::new(db),
+            jobs_dir,
+        })
+    }
+
+    fn db(&self) -> io::Result<MutexGuard<'_, Connection>> {
+        self.db.lock().map_err(|e| io::Error::other(e.to_string()))
+    }
+
+    /// Puts the jobs a previous process left `queued` or `running` back in
+    /// the queue state and removes the directories of jobs that were never
+    /// accepted. Returns the ids to queue, oldest first.
+    pub fn recover(&self) -> io::Result<Vec<i64>> {
+        let db = self.db()?;
+        db.execute(
+            "UPDATE jobs SET state = ?1, stage = NULL, started_ms = NULL
+             WHERE state IN (?1, ?2)",
+            [JobState::Queued, JobState::Running],
+        )
+        .map_err(db_err)?;
+        let ids = |sql: &str, params: &[&dyn rusqlite::ToSql]| -> io::Result<Vec<i64>> {
+            let mut st = db.prepare(sql).map_err(db_err)?;
+            st.query_map(params, |r| r.get(0))
+                .map_err(db_err)?
+                .collect::<rusqlite::Result<_>>()
+                .map_err(db_err)
+        };
+        let pending = ids(
+            "SELECT id FROM jobs WHERE state = ?1 ORDER BY id",
+            &[&JobState::Queued],
+        )?;
+        // Inputs are written before their row is committed: a directory
+        // without a row belongs to a submission that was never accepted.
+        let known = ids("SELECT id FROM jobs", &[])?;
+        for entry in std::fs::read_dir(&self.jobs_dir)? {
+            let entry = entry?;
+            let id = entry.file_name().to_string_lossy().parse::<i64>().ok();
+            if id.is_none_or(|id| !known.contains(&id)) {
+                let _ = std::fs::remove_dir_all(entry.path());
+            }
+        }
+        Ok(pending)
+    }
+
+    /// The directory of job `id`'s inputs and results.
+    pub fn job_dir(&self, id: i64) -> PathBuf {
+        self.jobs_dir.join(id.to_string())
+    }
+
+    /// Stores a new job: allocates its id, writes (and syncs) its inputs,
+    /// then commits its row as `queued`. Returns the id.
+    pub fn create(
+        &self,
+        scene: &[u8],
+        job: &[u8],
+        pvs: Option<&[u8]>,
+        bake: bool,
+    ) -> io::Result<i64> {
+        let db = self.db()?;
+        // Ids are never reused, not even those of deleted jobs.
+        let id: i64 = db
+            .query_row(
+                "SELECT MAX(COALESCE((SELECT v FROM meta WHERE k = 'next_id'), 1),
+                            COALESCE((SELECT MAX(id) FROM jobs), 0) + 1)",
+                [],
+                |r| r.get(0),
+            )
+            .map_err(db_err)?;
+        db.execute(
+            "INSERT INTO meta (k, v) VALUES ('next_id', ?1) ON CONFLICT(k) DO UPDATE SET v = ?1",
+            [id + 1],
+        )
+        .map_err(db_err)?;
+        let dir = self.job_dir(id);
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(&dir)?;
+        write_atomic(&dir.join("scene"), scene)?;
+        write_atomic(&dir.join("job.json"), job)?;
+        if let Some(p) = pvs {
+            write_atomic(&dir.join("pvs.json"), p)?;
+        }
+        let kind = if scene.starts_with(b"glTF") {
+            "glb"
+        } else {
+            "json"
+        };
+        db.execute(
+            "INSERT INTO jobs (id, state, bake, scene_kind, created_ms) VALUES (?1, ?2, ?3, ?4, ?5)",
+            rusqlite::params![id, JobState::Queued, bake as i64, kind, now_ms()],
+        )
+        .map_err(db_err)?;
+        Ok(id)
+    }
+
+    /// Records a job's new state, with its error or summary when given;
+    /// stamps the start time on `running` and the finish time on a final
+    /// state. A failure is logged: the job then keeps its previous row.
+    pub fn set_state(&self, id: i64, state: JobState, error: Option<&str>, summary: Option<&str>) {
+        let Ok(db) = self.db.lock() else { return };
+        let finished = state.is_final().then(now_ms);
+        let started = (state == JobState::Running).then(now_ms);
+        let r = db.execute(
+            "UPDATE jobs SET state = ?2, error = COALESCE(?3, error), summary = COALESCE(?4, summary),
+                 finished_ms = COALESCE(?5, finished_ms), started_ms = COALESCE(?6, started_ms)
+             WHERE id = ?1",
+            rusqlite::params![id, state, error, summary, finished, started],
+        );
+        if let Err(e) = r {
+            tracing::error!(job = id, "database update failed: {e}");
+        }
+    }
+
+    /// The row of job `id`; `Ok(None)` when there is no such job (or its
+    /// row cannot be read).
+    pub fn row(&self, id: i64) -> io::Result<Option<JobRow>> {
+        let db = self.db()?;
+        Ok(db
+            .query_row(
+                "SELECT state, stage, error, summary, bake, created_ms, started_ms, finished_ms
+                 FROM jobs WHERE id = ?1",
+                [id],
+                |r| {
+                    Ok(JobRow {
+                        state: r.get(0)?,
+                        stage: r.get(1)?,
+                        error: r.get(2)?,
+                        summary: r.get(3)?,
+                        bake: r.get::<_, i64>(4)? != 0,
+                        created_ms: r.get(5)?,
+                        started_ms: r.get(6)?,
+                        finished_ms: r.get(7)?,
+                    })
+                },
+            )
+            .ok())
+    }
+
+    /// Up to `limit` job ids greater than `after`, ascending.
+    pub fn ids_after(&self, after: i64, limit: i64) -> io::Result<Vec<i64>> {
+        let db = self.db()?;
+        let mut stmt = db
+            .prepare("SELECT id FROM jobs WHERE id > ?1 ORDER BY id LIMIT ?2")
+            .map_err(db_err)?;
+        stmt.query_map([after, limit], |r| r.get(0))
+            .map_err(db_err)?
+            .collect::<rusqlite::Result<_>>()
+            .map_err(db_err)
+    }
+
+    /// Removes job `id`'s row, then its files.
+    pub fn delete(&self, id: i64) -> io::Result<()> {
+        self.db()?
+            .execute("DELETE FROM jobs WHERE id = ?1", [id])
+            .map_err(db_err)?;
+        let _ = std::fs::remove_dir_all(self.job_dir(id));
+        Ok(())
+    }
+}

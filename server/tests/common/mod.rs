@@ -1,0 +1,26 @@
+//! Helpers shared by the integration tests.
+
+#[allow(dead_code)] // the restart test talks to a child process without it
+pub mod client;
+
+/// The placement the command line writes for `scene` (GLB or summary bytes)
+/// and `job` (JSON bytes): what the service must store byte for byte.
+#[allow(dead_code)] // not every test binary compares placements
+pub fn cli_placement(scene: &[u8], job: &[u8]) -> Vec<u8> {
+    use optimizer::input::{GeometryUse, Load, SceneInput, Source};
+    let job = optimizer::api::job::Job::from_json(job, "job").unwrap();
+    let load = Load::new(
+        Source::Bytes {
+            bytes: scene,
+            name: "scene",
+        },
+        GeometryUse::WhenNeeded,
+    );
+    let input = SceneInput::load(&load, &job, "job").unwrap();
+    let out = input
+        .prepare(&job, "job")
+        .unwrap()
+        .place(&Default::default(), &Default::default())
+        .unwrap();
+    optimizer::to_json_bytes(&out.placement).unwrap()
+}
