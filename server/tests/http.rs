@@ -102,6 +102,31 @@ async fn wait_final(addr: SocketAddr, id: i64, limit: Duration) -> Value {
     }
 }
 
+/// Asserts that a job's evaluation holds the guarantee where it could have
+/// failed: no violation in solved problem views (uniform views and views
+/// sampled inside them), while its control (the same views with no
+/// impostor) breaks the target in at least 1 % of those views. The job's
+/// summary repeats the figures.
+fn assert_guarantee_with_control(status: &Value, e: &Value) {
+    let n = |k: &str| e[k].as_u64().unwrap();
+    assert_eq!(n("violations_in_solved"), 0, "{e}");
+    assert_eq!(n("violations_in_cpv_views"), 0, "{e}");
+    let in_solved = n("views_in_cpvs") - n("views_in_unsolved_cpvs") + n("cpv_views")
+        - n("cpv_views_in_unsolved");
+    let control = e["control"]["violations_in_solved"].as_u64().unwrap()
+        + e["control"]["violations_in_cpv_views"].as_u64().unwrap();
+    assert!(
+        control > 0 && control as f64 >= 0.01 * in_solved as f64,
+        "the control does not fail ({control} of {in_solved} views): the check proves nothing: {e}"
+    );
+    let summary = &status["summary"];
+    assert_eq!(summary["violations_in_cpv_views"], 0, "{status}");
+    assert_eq!(
+        summary["control_violations_in_solved"], e["control"]["violations_in_solved"],
+        "{status}"
+    );
+}
+
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn summary_and_glb_jobs_succeed_with_the_cli_bytes() {
     let mut cfg = Config::new(temp_dir("ok"));
@@ -142,7 +167,7 @@ async fn summary_and_glb_jobs_succeed_with_the_cli_bytes() {
         );
         let (s, e) = get_json(addr, &format!("/v1/jobs/{id}/evaluation")).await;
         assert_eq!(s, 200);
-        assert_eq!(e["violations_in_solved"], 0, "{e}");
+        assert_guarantee_with_control(&v, &e);
         if v["summary"]["impostors"].as_u64().unwrap() > 0 {
             assert_eq!(
                 v["summary"]["parallax_max_px"], e["parallax"]["max_px"],
@@ -267,11 +292,33 @@ async fn full_queue_and_cancellation() {
     let id = serde_json::from_slice::<Value>(&b).unwrap()["id"]
         .as_i64()
         .unwrap();
-    tokio::time::sleep(Duration::from_millis(1500)).await;
+    // Wait until a worker runs it and has started placing.
+    let begin = Instant::now();
+    loop {
+        let (_, v) = get_json(addr, &format!("/v1/jobs/{id}")).await;
+        if v["state"] == "running" && v["progress"].as_f64().unwrap_or(0.0) > 0.0 {
+            break;
+        }
+        assert!(
+            v["state"] != "succeeded",
+            "the job ended before the cancel: {v}"
+        );
+        assert!(
+            begin.elapsed() < Duration::from_secs(60),
+            "never running: {v}"
+        );
+        tokio::time::sleep(Duration::from_millis(50)).await;
+    }
+    let asked = Instant::now();
     let (s, _) = request(addr, "DELETE", &format!("/v1/jobs/{id}"), None, b"").await;
     assert_eq!(s, 200);
     let v = wait_final(addr, id, Duration::from_secs(30)).await;
     assert_eq!(v["state"], "cancelled", "{v}");
+    assert!(
+        asked.elapsed() < Duration::from_secs(2),
+        "cancelled after {:?}, want under 2 s",
+        asked.elapsed()
+    );
     let (s, _) = get_json(addr, &format!("/v1/jobs/{id}/placement")).await;
     assert_eq!(s, 409);
 }
@@ -312,6 +359,7 @@ async fn visibility_jobs_run_and_missing_inputs_are_refused() {
     );
     assert!(html.contains("<svg"), "the walkthrough chart is drawn");
     assert_eq!(eval["visibility"]["missed_objects"], 0, "{eval}");
+    assert_guarantee_with_control(&v, &eval);
 
     // Conservative visibility needs geometry: a summary is refused up front.
     let summary = serde_json::to_value(

@@ -87,7 +87,27 @@ fn kill_9_and_restart_finishes_every_job() {
                 .unwrap(),
         );
     }
-    std::thread::sleep(Duration::from_millis(300));
+    // Kill while the first job is being placed (the city-small job takes
+    // about a second to place and as long again to evaluate), so the restart
+    // must re-run a job that was `running`, not only queued ones.
+    let waited = Instant::now();
+    loop {
+        let (_, b) = request(addr, "GET", &format!("/v1/jobs/{}", ids[0]), b"").unwrap();
+        let v: Value = serde_json::from_slice(&b).unwrap();
+        if v["state"] == "running" && v["progress"].as_f64().unwrap_or(0.0) > 0.0 {
+            break;
+        }
+        assert!(
+            v["state"] == "queued" || v["state"] == "running",
+            "job {} ended before the kill: {v}",
+            ids[0]
+        );
+        assert!(
+            waited.elapsed() < Duration::from_secs(30),
+            "never running: {v}"
+        );
+        std::thread::sleep(Duration::from_millis(10));
+    }
     child.kill().unwrap(); // SIGKILL
     child.wait().unwrap();
 
