@@ -43,6 +43,10 @@ pub struct EvaluateArgs {
     /// Per-channel colour tolerance (0–255) of the image mismatch test.
     #[arg(long, default_value_t = 24)]
     tolerance: u8,
+    /// Smallest share of the image a view's impostor pixels must cover for
+    /// the view to be compared (--images).
+    #[arg(long, default_value_t = 0.01)]
+    min_coverage: f64,
     /// Write the worst view's renders side by side as a PNG into this directory.
     #[arg(long)]
     dump: Option<PathBuf>,
@@ -126,16 +130,32 @@ pub fn run(a: EvaluateArgs) -> Result<ExitCode> {
             views: a.images,
             seed: a.seed,
             tolerance: a.tolerance,
+            min_coverage: a.min_coverage,
         };
         let (report, pair) = prepared.image_error(&p, layers, &opts, &name)?;
         eprintln!(
-            "{} image views: PSNR mean {:.2} dB (min {:.2}), mismatch mean {:.4} (max {:.4})",
+            "{} image views ({} left out, their impostors under {:.1} % of the image), \
+             impostors on {:.2} % of the image: over their pixels PSNR mean {:.2} dB \
+             (min {:.2}), mismatch mean {:.4} (max {:.4}); control with magenta layers: \
+             mismatch mean {:.4}",
             report.views,
+            report.views_below_coverage,
+            100.0 * report.min_coverage,
+            100.0 * report.impostor_pixel_fraction,
             report.psnr_db.mean,
             report.psnr_db.min,
             report.mismatch_fraction.mean,
-            report.mismatch_fraction.max
+            report.mismatch_fraction.max,
+            report.control_mismatch_fraction.mean
         );
+        if report.views == 0 {
+            eprintln!("image check: no view shows enough impostor pixels; it proves nothing");
+        } else if report.control_mismatch_fraction.mean <= 2.0 * report.mismatch_fraction.mean {
+            eprintln!(
+                "image check: the magenta control mismatches hardly more than the impostors; \
+                 it proves little"
+            );
+        }
         if let (Some(dir), Some(pair)) = (&a.dump, pair) {
             std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
             write_output(Some(&dir.join("worst_view.png")), &pair.side_by_side_png()?)?;

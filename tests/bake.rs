@@ -27,7 +27,8 @@ fn validate(glb: &std::path::Path) -> serde_json::Value {
 fn bake_validates_and_looks_like_the_geometry() {
     let dir = tmp("bake");
     let city = city("0.1");
-    let job = root().join("fixtures/jobs/city-small.json");
+    // Flown over: impostors close enough to cover a share of the image.
+    let job = root().join("fixtures/jobs/city-small-flyover.json");
     let p = dir.join("p.json");
     let o = place(&city, &job, &p, &[]);
     assert!(matches!(code(&o), 0 | 3), "{}", stderr(&o));
@@ -78,19 +79,33 @@ fn bake_validates_and_looks_like_the_geometry() {
     assert_eq!(code(&o), 0, "{}", stderr(&o));
     let e = read_json(&eval);
     let image = &e["image"];
-    assert_eq!(image["views"], 24, "{image}");
+    let f = |k: &str| image[k].as_f64().unwrap();
+    let views = image["views"].as_u64().unwrap();
+    assert!(
+        views >= 8,
+        "only {views} of 24 views show impostors on 1 % of the image: {image}"
+    );
+    assert!(f("impostor_pixel_fraction") >= 0.01, "{image}");
     let mean = image["mismatch_fraction"]["mean"].as_f64().unwrap();
     let max = image["mismatch_fraction"]["max"].as_f64().unwrap();
-    assert!(mean <= 0.01, "mean mismatch {mean}: {image}");
-    assert!(max <= 0.05, "worst mismatch {max}: {image}");
-    assert!(dir.join("worst_view.png").exists());
-    // The views really show impostors (few pixels: without visibility
-    // culling many impostors stand behind buildings).
-    let drawn = image["impostor_pixel_fraction"].as_f64().unwrap();
     assert!(
-        drawn > 0.0,
-        "impostors cover {drawn} of the pixels: {image}"
+        mean <= 0.1,
+        "mean mismatch {mean} over impostor pixels: {image}"
     );
+    assert!(
+        max <= 0.25,
+        "worst mismatch {max} over impostor pixels: {image}"
+    );
+    // The control (the same views, every layer texel magenta) must fail
+    // the same check by far, or the check looked at nothing.
+    let control = image["control_mismatch_fraction"]["mean"].as_f64().unwrap();
+    assert!(
+        control >= 0.5 && control >= 5.0 * mean,
+        "the magenta control mismatches {control} (impostors {mean}): the check proves nothing"
+    );
+    assert!(dir.join("worst_view.png").exists());
+    // The placement holds the frame-time guarantee where it could fail.
+    check_guarantee(&city, &job, &p, 2000, 0.01, &[]);
 }
 
 #[test]

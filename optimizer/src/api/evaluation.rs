@@ -182,7 +182,7 @@ pub struct PsnrSpread {
 }
 
 /// Mean and maximum of a per-view mismatch fraction.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct MismatchSpread {
     /// Mean over the views.
@@ -203,9 +203,11 @@ pub struct WorstView {
     pub eye: [f64; 3],
     /// Unit view direction.
     pub direction: [f64; 3],
-    /// Its mismatch fraction.
+    /// Its mismatch fraction (over its impostor pixels).
     pub mismatch_fraction: f64,
-    /// Its PSNR, dB.
+    /// Share of its image covered by impostor pixels.
+    pub impostor_pixel_fraction: f64,
+    /// Its PSNR over the impostor pixels, dB.
     pub psnr_db: f64,
 }
 
@@ -213,22 +215,35 @@ pub struct WorstView {
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct ImageReport {
-    /// Views rendered (each twice); 0 when no CPV has impostors.
+    /// Views compared: views whose impostor pixels cover at least
+    /// `min_coverage` of the image; 0 when no CPV has impostors.
     pub views: u32,
+    /// Views sampled but left out because their impostors cover less than
+    /// `min_coverage` of the image (they would only dilute the figures).
+    pub views_below_coverage: u32,
     /// Seed of the view sampler.
     pub seed: u64,
     /// Per-channel colour tolerance (0–255) of the mismatch test.
     pub tolerance: u8,
     /// Image size, pixels.
     pub resolution: [u32; 2],
-    /// PSNR over RGB, dB (capped at 100 for identical images).
+    /// The smallest share of the image a view's impostor pixels must cover
+    /// for the view to be compared.
+    pub min_coverage: f64,
+    /// PSNR over RGB of the impostor pixels, dB (capped at 100 for
+    /// identical images).
     pub psnr_db: PsnrSpread,
-    /// Share of pixels without a match within one pixel.
+    /// Share of the impostor pixels (where the replaced geometry was drawn
+    /// or the layers draw) whose colour has no match within one pixel in
+    /// the other image.
     pub mismatch_fraction: MismatchSpread,
-    /// Mean share of pixels drawn by impostor quads (pixels that change when
-    /// the quads are added to the geometry they do not replace): shows that
-    /// the comparison actually looks at impostors.
+    /// Share of the image covered by impostor pixels, mean over the
+    /// compared views.
     pub impostor_pixel_fraction: f64,
-    /// The view with the largest mismatch fraction.
+    /// The control: the same views with every layer texel magenta (its
+    /// coverage kept). Where it mismatches no more than the impostors, the
+    /// check proves nothing about their images.
+    pub control_mismatch_fraction: MismatchSpread,
+    /// The compared view with the largest mismatch fraction.
     pub worst_view: Option<WorstView>,
 }

@@ -376,15 +376,39 @@ pub fn render_layers(
     source: &str,
 ) -> Result<Vec<Layer>> {
     check(scene, geom, placement, source)?;
+    Ok(render(
+        geom,
+        &placement.impostors.iter().collect::<Vec<_>>(),
+    ))
+}
+
+/// The layers of the impostors `ids` of `placement` only, in the order of
+/// `ids` (as [`render_layers`] renders them; ids beyond the placement are
+/// ignored).
+pub fn render_layers_of(
+    scene: &Scene,
+    geom: &SceneGeometry,
+    placement: &Placement,
+    ids: &[u32],
+    source: &str,
+) -> Result<Vec<Layer>> {
+    check(scene, geom, placement, source)?;
+    let chosen: Vec<&PlacedImpostor> = ids
+        .iter()
+        .filter_map(|&k| placement.impostors.get(k as usize))
+        .collect();
+    Ok(render(geom, &chosen))
+}
+
+fn render(geom: &SceneGeometry, impostors: &[&PlacedImpostor]) -> Vec<Layer> {
     let by_object = geom_objects(geom);
-    Ok(placement
-        .impostors
+    impostors
         .par_iter()
         .map(|imp| render_impostor(geom, &by_object, imp))
         .collect::<Vec<_>>()
         .into_iter()
         .flatten()
-        .collect())
+        .collect()
 }
 
 /// Reads the layers back from a GLB written by [`bake`]: every mesh node is

@@ -1,18 +1,24 @@
 //! Image error of a placement's impostors (DESIGN §2.10): render sampled
-//! views twice with the same rasterizer — all geometry, and geometry with
-//! the view's CPV's impostors swapped in — and compare.
+//! views with the same rasterizer — all geometry, and geometry with the
+//! view's CPV's impostors swapped in — and compare where the impostors are.
 //!
-//! Views are sampled where impostors are used: a CPV that has impostors is
-//! chosen uniformly, then a position uniformly in its region and a direction
-//! in its direction interval (within the job's pitch range) aimed at one of
-//! its impostors as far as the interval allows. A view whose CPV has no
-//! impostors, or that looks away from them, renders identically and would
-//! only dilute the figures.
+//! Views are sampled where impostors are used: per view, candidates are
+//! drawn in CPVs that have impostors (a position in the region, uniform or
+//! pulled towards one of its impostors, and a direction in its direction
+//! interval within the job's pitch range, aimed at that impostor as far as
+//! the interval allows), and the candidate whose impostor spheres cover the
+//! most of the image is rendered. Views close to impostors are where their
+//! errors show.
 //!
-//! Per view: PSNR over RGB, and the mismatch fraction — the share of pixels
-//! whose colour is matched (every channel within `tolerance`) by no pixel of
-//! the other image within one pixel, in either direction (the paper's
-//! one-pixel criterion).
+//! Only the impostor pixels count: those where the replaced geometry is
+//! drawn or the layers draw. A view whose impostor pixels cover less than
+//! `min_coverage` of the image is left out (and counted). Per view: PSNR
+//! over those pixels, and the mismatch fraction — the share of them whose
+//! colour is matched (every channel within `tolerance`) by no pixel of the
+//! other image within one pixel, in either direction (the paper's
+//! one-pixel criterion). The control renders the same views with every
+//! layer texel magenta: a check whose control does not mismatch far more
+//! than the impostors looked at nothing.
 
 use std::collections::HashMap;
 
@@ -40,6 +46,9 @@ pub struct ImageOptions {
     pub seed: u64,
     /// Largest per-channel difference (0–255) of matching colours.
     pub tolerance: u8,
+    /// Smallest share of the image a view's impostor pixels must cover for
+    /// the view to be compared.
+    pub min_coverage: f64,
 }
 
 impl Default for ImageOptions {
@@ -48,6 +57,7 @@ impl Default for ImageOptions {
             views: 64,
             seed: 1,
             tolerance: 24,
+            min_coverage: 0.01,
         }
     }
 }
@@ -160,11 +170,17 @@ impl<'a> Renderer<'a> {
     }
 }
 
-/// PSNR over RGB of two RGBA8 images, dB, capped at 100.
-pub fn psnr_db(a: &[u8], b: &[u8]) -> f64 {
+/// PSNR over RGB of the pixels of `mask` of two RGBA8 images, dB, capped
+/// at 100 (also for an empty mask).
+pub fn psnr_db(a: &[u8], b: &[u8], mask: &[bool]) -> f64 {
     let mut se = 0.0f64;
     let mut n = 0u64;
-    for (p, q) in a.chunks_exact(4).zip(b.chunks_exact(4)) {
+    for ((p, q), _) in a
+        .chunks_exact(4)
+        .zip(b.chunks_exact(4))
+        .zip(mask)
+        .filter(|(_, m)| **m)
+    {
         for k in 0..3 {
             let d = f64::from(p[k]) - f64::from(q[k]);
             se += d * d;
@@ -177,9 +193,16 @@ pub fn psnr_db(a: &[u8], b: &[u8]) -> f64 {
     (10.0 * (255.0f64.powi(2) / (se / n as f64)).log10()).min(100.0)
 }
 
-/// Share of pixels whose colour has no match within one pixel in the other
-/// image (in either direction).
-pub fn mismatch_fraction(a: &[u8], b: &[u8], width: u32, height: u32, tolerance: u8) -> f64 {
+/// Share of the pixels of `mask` whose colour has no match within one pixel
+/// in the other image (in either direction); 0 for an empty mask.
+pub fn mismatch_fraction(
+    a: &[u8],
+    b: &[u8],
+    width: u32,
+    height: u32,
+    tolerance: u8,
+    mask: &[bool],
+) -> f64 {
     let (w, h) = (width as i64, height as i64);
     let px = |img: &[u8], x: i64, y: i64| -> [u8; 4] {
         let i = ((y * w + x) * 4) as usize;
@@ -198,88 +221,110 @@ pub fn mismatch_fraction(a: &[u8], b: &[u8], width: u32, height: u32, tolerance:
         }
         false
     };
-    let mut bad = 0u64;
+    let (mut bad, mut counted) = (0u64, 0u64);
     for y in 0..h {
         for x in 0..w {
+            if !mask[(y * w + x) as usize] {
+                continue;
+            }
+            counted += 1;
             if !matched(a, b, x, y) || !matched(b, a, x, y) {
                 bad += 1;
             }
         }
     }
-    bad as f64 / (w * h).max(1) as f64
+    if counted == 0 {
+        0.0
+    } else {
+        bad as f64 / counted as f64
+    }
 }
 
-/// Compares geometry-only and impostor renders at views sampled in the CPVs
-/// that use impostors. `layers` are the placement's rendered layers (from
-/// [`crate::bake::render_layers`] or read back from a baked GLB).
-pub fn image_error(
-    geom: &SceneGeometry,
+/// The layers with every texel's colour magenta (coverage kept): the image
+/// check's control.
+fn magenta(layers: &[Layer]) -> Vec<Layer> {
+    layers
+        .iter()
+        .map(|l| {
+            let mut l = l.clone();
+            for p in l.rgba.chunks_exact_mut(4) {
+                p[..3].copy_from_slice(&[255, 0, 255]);
+            }
+            l
+        })
+        .collect()
+}
+
+/// Candidate views drawn per compared view.
+const CANDIDATES: u32 = 32;
+
+/// A view chosen for the comparison.
+struct Chosen {
+    /// Index among the sampled views.
+    index: u32,
+    cpv: u32,
+    eye: DVec3,
+    dir: DVec3,
+}
+
+/// Share of a `w × h` image covered by the discs of `spheres` seen from
+/// `frustum` (an estimate: overlaps are counted twice; at most 1).
+fn sphere_coverage(spheres: &[(DVec3, f64)], frustum: &ViewFrustum, f_px: f64, pixels: f64) -> f64 {
+    let mut covered = 0.0;
+    for &(c, r) in spheres {
+        if !frustum.intersects_sphere(c, r) {
+            continue;
+        }
+        let d = (c - frustum.eye()).length();
+        if d <= r {
+            return 1.0;
+        }
+        covered += std::f64::consts::PI * f_px * f_px * r * r / (d * d - r * r);
+    }
+    (covered / pixels).min(1.0)
+}
+
+/// Draws the views to compare: per view, the candidate (of [`CANDIDATES`])
+/// whose CPV's impostor spheres cover the most of the image.
+fn choose_views(
     job: &Job,
     placement: &Placement,
-    layers: &[Layer],
+    with_impostors: &[u32],
     opts: &ImageOptions,
-) -> Result<(ImageReport, Option<ImagePair>)> {
-    if opts.views > 100_000 {
-        return Err(Error::bad(
-            "--images",
-            format!("{} views is too many (at most 100000)", opts.views),
-        ));
-    }
+) -> Vec<Chosen> {
     let [w, h] = job.camera.resolution;
     let aspect = f64::from(w) / f64::from(h);
+    let f_px = 0.5 * f64::from(h) / (0.5 * job.camera.fov_deg.to_radians()).tan();
+    let pixels = f64::from(w) * f64::from(h);
     let pitch = job.view_space.pitch_deg.map(f64::to_radians);
-    let mut by_impostor: Vec<Vec<&Layer>> = vec![Vec::new(); placement.impostors.len()];
-    for l in layers {
-        if let Some(v) = by_impostor.get_mut(l.impostor as usize) {
-            v.push(l);
-        }
-    }
-    let with_impostors: Vec<u32> = placement
-        .cpvs
-        .iter()
-        .filter(|c| !c.impostors.is_empty())
-        .map(|c| c.id)
-        .collect();
-    let renderer = Renderer::new(geom);
-    let empty = ImageReport {
-        views: 0,
-        seed: opts.seed,
-        tolerance: opts.tolerance,
-        resolution: [w, h],
-        psnr_db: PsnrSpread {
-            mean: 100.0,
-            min: 100.0,
-        },
-        mismatch_fraction: MismatchSpread {
-            mean: 0.0,
-            max: 0.0,
-        },
-        impostor_pixel_fraction: 0.0,
-        worst_view: None,
-    };
-    if with_impostors.is_empty() || opts.views == 0 {
-        return Ok((empty, None));
-    }
-    // (mismatch, psnr, view info, images of this view, impostor pixels)
-    let results: Vec<(f64, f64, WorstView, ImagePair, f64)> = (0..opts.views)
+    (0..opts.views)
         .into_par_iter()
         .filter_map(|i| {
             let mut rng = Rng::new(opts.seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) ^ u64::from(i));
-            // A CPV with impostors and a view inside it within the pitch band.
-            let mut found = None;
-            for _ in 0..256 {
+            let mut best: Option<(f64, Chosen)> = None;
+            for attempt in 0..CANDIDATES * 8 {
+                if attempt >= CANDIDATES && best.is_some() {
+                    break;
+                }
                 let c = with_impostors[(rng.next_u64() % with_impostors.len() as u64) as usize];
                 let cpv = &placement.cpvs[c as usize];
-                let eye = rng.in_box(
+                let k = cpv.impostors[(rng.next_u64() % cpv.impostors.len() as u64) as usize];
+                let centre = DVec3::from_array(placement.impostors[k as usize].sphere.center);
+                let (lo, hi) = (
                     DVec3::from_array(cpv.region.min),
                     DVec3::from_array(cpv.region.max),
                 );
+                // Half the candidates are pulled towards the impostor: the
+                // region's nearest point to it, blended with a uniform one.
+                let uniform = rng.in_box(lo, hi);
+                let eye = if attempt % 2 == 1 {
+                    uniform.lerp(centre.clamp(lo, hi), rng.range(0.0, 1.0))
+                } else {
+                    uniform
+                };
                 let d = &cpv.directions;
                 let (mut u, mut v) = (rng.range(d.u[0], d.u[1]), rng.range(d.v[0], d.v[1]));
-                // Aim at one of the CPV's impostors, as far as the CPV's
-                // direction interval allows.
-                let k = cpv.impostors[(rng.next_u64() % cpv.impostors.len() as u64) as usize];
-                let target = DVec3::from_array(placement.impostors[k as usize].sphere.center) - eye;
+                let target = centre - eye;
                 let axis = usize::from(d.face / 2);
                 let sign = if d.face.is_multiple_of(2) { 1.0 } else { -1.0 };
                 let along = target[axis] * sign;
@@ -293,89 +338,221 @@ pub fn image_error(
                 }
                 let dir = face_direction(d.face, u, v).normalize();
                 let el = dir.y.clamp(-1.0, 1.0).asin();
-                if el >= pitch[0] - 1e-9 && el <= pitch[1] + 1e-9 {
-                    found = Some((c, eye, dir));
-                    break;
+                if el < pitch[0] - 1e-9 || el > pitch[1] + 1e-9 {
+                    continue;
+                }
+                let frustum = ViewFrustum::new(eye, dir, job.camera.fov_deg, aspect);
+                let spheres: Vec<(DVec3, f64)> = cpv
+                    .impostors
+                    .iter()
+                    .map(|&k| {
+                        let s = &placement.impostors[k as usize].sphere;
+                        (DVec3::from_array(s.center), s.radius)
+                    })
+                    .collect();
+                let estimate = sphere_coverage(&spheres, &frustum, f_px, pixels);
+                if best.as_ref().is_none_or(|(b, _)| estimate > *b) {
+                    best = Some((
+                        estimate,
+                        Chosen {
+                            index: i,
+                            cpv: c,
+                            eye,
+                            dir,
+                        },
+                    ));
                 }
             }
-            let (c, eye, dir) = found?;
-            let cpv = &placement.cpvs[c as usize];
-            let view = View::perspective(eye, dir, job.camera.fov_deg, w, h);
-            let frustum = ViewFrustum::new(eye, dir, job.camera.fov_deg, aspect);
+            best.map(|(_, chosen)| chosen)
+        })
+        .collect()
+}
+
+/// The layers per impostor id (`n` impostors).
+fn by_impostor(layers: &[Layer], n: usize) -> Vec<Vec<&Layer>> {
+    let mut by: Vec<Vec<&Layer>> = vec![Vec::new(); n];
+    for l in layers {
+        if let Some(v) = by.get_mut(l.impostor as usize) {
+            v.push(l);
+        }
+    }
+    by
+}
+
+/// The layers of `impostors`.
+fn layers_of<'l>(by: &[Vec<&'l Layer>], impostors: &[u32]) -> Vec<&'l Layer> {
+    impostors
+        .iter()
+        .flat_map(|&k| by[k as usize].iter().copied())
+        .collect()
+}
+
+/// Pixel `i` of an RGBA8 image.
+fn px(img: &[u8], i: usize) -> &[u8] {
+    &img[4 * i..4 * i + 4]
+}
+
+/// One compared view.
+struct Compared {
+    mismatch: f64,
+    control: f64,
+    psnr: f64,
+    coverage: f64,
+    worst: WorstView,
+    pair: ImagePair,
+}
+
+/// Compares geometry-only and impostor renders at views sampled in the CPVs
+/// that use impostors, over the impostor pixels, with the magenta control.
+/// `layers` gives the layers of the impostors it is asked for (`ids`,
+/// sorted and distinct): rendered from the placement, or read back from a
+/// baked GLB.
+pub fn image_error(
+    geom: &SceneGeometry,
+    job: &Job,
+    placement: &Placement,
+    layers: impl FnOnce(&[u32]) -> Result<Vec<Layer>>,
+    opts: &ImageOptions,
+) -> Result<(ImageReport, Option<ImagePair>)> {
+    if opts.views > 100_000 {
+        return Err(Error::bad(
+            "--images",
+            format!("{} views is too many (at most 100000)", opts.views),
+        ));
+    }
+    if !(0.0..=1.0).contains(&opts.min_coverage) {
+        return Err(Error::bad(
+            "--min-coverage",
+            format!("{} must be between 0 and 1", opts.min_coverage),
+        ));
+    }
+    let [w, h] = job.camera.resolution;
+    let aspect = f64::from(w) / f64::from(h);
+    let with_impostors: Vec<u32> = placement
+        .cpvs
+        .iter()
+        .filter(|c| !c.impostors.is_empty())
+        .map(|c| c.id)
+        .collect();
+    let mut report = ImageReport {
+        views: 0,
+        views_below_coverage: 0,
+        seed: opts.seed,
+        tolerance: opts.tolerance,
+        resolution: [w, h],
+        min_coverage: opts.min_coverage,
+        psnr_db: PsnrSpread {
+            mean: 100.0,
+            min: 100.0,
+        },
+        mismatch_fraction: MismatchSpread::default(),
+        impostor_pixel_fraction: 0.0,
+        control_mismatch_fraction: MismatchSpread::default(),
+        worst_view: None,
+    };
+    if with_impostors.is_empty() || opts.views == 0 {
+        return Ok((report, None));
+    }
+    let chosen = choose_views(job, placement, &with_impostors, opts);
+    // Only the layers of the impostors the chosen views use.
+    let mut ids: Vec<u32> = chosen
+        .iter()
+        .flat_map(|c| placement.cpvs[c.cpv as usize].impostors.iter().copied())
+        .collect();
+    ids.sort_unstable();
+    ids.dedup();
+    let layers = layers(&ids)?;
+    let control = magenta(&layers);
+    let n = placement.impostors.len();
+    let (real_by, control_by) = (by_impostor(&layers, n), by_impostor(&control, n));
+    let renderer = Renderer::new(geom);
+    let results: Vec<Option<Compared>> = chosen
+        .par_iter()
+        .map(|c| {
+            let cpv = &placement.cpvs[c.cpv as usize];
+            let view = View::perspective(c.eye, c.dir, job.camera.fov_deg, w, h);
+            let frustum = ViewFrustum::new(c.eye, c.dir, job.camera.fov_deg, aspect);
             let mut skip: Vec<u32> = cpv
                 .impostors
                 .iter()
                 .flat_map(|&k| placement.impostors[k as usize].objects.iter().copied())
                 .collect();
             skip.sort_unstable();
-            let quads: Vec<&Layer> = cpv
-                .impostors
-                .iter()
-                .flat_map(|&k| by_impostor[k as usize].iter().copied())
-                .collect();
             let mut raster = Raster::new(w, h);
-            renderer.render(&mut raster, &view, &frustum, &[], &[]);
-            let a = raster.rgba_bytes();
-            renderer.render(&mut raster, &view, &frustum, &skip, &[]);
-            let holes = raster.rgba_bytes();
-            renderer.render(&mut raster, &view, &frustum, &skip, &quads);
-            let b = raster.rgba_bytes();
-            let drawn = holes
-                .chunks_exact(4)
-                .zip(b.chunks_exact(4))
-                .filter(|(p, q)| p != q)
-                .count() as f64
-                / f64::from(w * h).max(1.0);
-            let mismatch = mismatch_fraction(&a, &b, w, h, opts.tolerance);
-            let psnr = psnr_db(&a, &b);
-            Some((
+            let mut draw = |skip: &[u32], layers: &[&Layer]| {
+                renderer.render(&mut raster, &view, &frustum, skip, layers);
+                raster.rgba_bytes()
+            };
+            let a = draw(&[], &[]);
+            let holes = draw(&skip, &[]);
+            let b = draw(&skip, &layers_of(&real_by, &cpv.impostors));
+            let m = draw(&skip, &layers_of(&control_by, &cpv.impostors));
+            let mask: Vec<bool> = (0..(w * h) as usize)
+                .map(|i| {
+                    px(&a, i) != px(&holes, i)
+                        || px(&b, i) != px(&holes, i)
+                        || px(&m, i) != px(&holes, i)
+                })
+                .collect();
+            let coverage = mask.iter().filter(|&&x| x).count() as f64 / f64::from(w * h).max(1.0);
+            if coverage < opts.min_coverage || coverage == 0.0 {
+                return None;
+            }
+            let mismatch = mismatch_fraction(&a, &b, w, h, opts.tolerance, &mask);
+            let psnr = psnr_db(&a, &b, &mask);
+            Some(Compared {
                 mismatch,
+                control: mismatch_fraction(&a, &m, w, h, opts.tolerance, &mask),
                 psnr,
-                WorstView {
-                    view: i,
-                    cpv: c,
-                    eye: eye.to_array(),
-                    direction: dir.to_array(),
+                coverage,
+                worst: WorstView {
+                    view: c.index,
+                    cpv: c.cpv,
+                    eye: c.eye.to_array(),
+                    direction: c.dir.to_array(),
                     mismatch_fraction: mismatch,
+                    impostor_pixel_fraction: coverage,
                     psnr_db: psnr,
                 },
-                ImagePair {
+                pair: ImagePair {
                     width: w,
                     height: h,
                     geometry: a,
                     impostors: b,
                 },
-                drawn,
-            ))
+            })
         })
         .collect();
+    report.views_below_coverage = (opts.views as usize - results.iter().flatten().count()) as u32;
+    let results: Vec<Compared> = results.into_iter().flatten().collect();
     if results.is_empty() {
-        return Ok((empty, None));
+        return Ok((report, None));
     }
     let n = results.len() as f64;
+    let mean = |f: fn(&Compared) -> f64| results.iter().map(f).sum::<f64>() / n;
+    let max = |f: fn(&Compared) -> f64| results.iter().map(f).fold(0.0, f64::max);
     let worst = results
         .iter()
         .enumerate()
-        .max_by(|x, y| x.1.0.total_cmp(&y.1.0).then(y.0.cmp(&x.0)))
+        .max_by(|x, y| x.1.mismatch.total_cmp(&y.1.mismatch).then(y.0.cmp(&x.0)))
         .map(|(i, _)| i)
         .expect("non-empty");
-    let report = ImageReport {
-        views: results.len() as u32,
-        seed: opts.seed,
-        tolerance: opts.tolerance,
-        resolution: [w, h],
-        psnr_db: PsnrSpread {
-            mean: results.iter().map(|r| r.1).sum::<f64>() / n,
-            min: results.iter().map(|r| r.1).fold(f64::INFINITY, f64::min),
-        },
-        mismatch_fraction: MismatchSpread {
-            mean: results.iter().map(|r| r.0).sum::<f64>() / n,
-            max: results[worst].0,
-        },
-        impostor_pixel_fraction: results.iter().map(|r| r.4).sum::<f64>() / n,
-        worst_view: Some(results[worst].2.clone()),
+    report.views = results.len() as u32;
+    report.psnr_db = PsnrSpread {
+        mean: mean(|r| r.psnr),
+        min: results.iter().map(|r| r.psnr).fold(f64::INFINITY, f64::min),
     };
-    let pair = results.into_iter().nth(worst).map(|r| r.3);
+    report.mismatch_fraction = MismatchSpread {
+        mean: mean(|r| r.mismatch),
+        max: max(|r| r.mismatch),
+    };
+    report.control_mismatch_fraction = MismatchSpread {
+        mean: mean(|r| r.control),
+        max: max(|r| r.control),
+    };
+    report.impostor_pixel_fraction = mean(|r| r.coverage);
+    report.worst_view = Some(results[worst].worst.clone());
+    let pair = results.into_iter().nth(worst).map(|r| r.pair);
     Ok((report, pair))
 }
 
@@ -412,13 +589,15 @@ impl Prepared<'_> {
                 "the image check needs the scene's geometry (a .glb/.gltf scene)",
             )
         })?;
-        let layers = match layers {
-            LayerSource::Bake => {
-                crate::bake::render_layers(&self.input().scene, geom, placement, source)?
+        let scene = &self.input().scene;
+        let layers = |ids: &[u32]| match layers {
+            LayerSource::Bake => crate::bake::render_layers_of(scene, geom, placement, ids, source),
+            LayerSource::Glb { bytes, name } => {
+                placement.validate(scene, source)?;
+                crate::bake::read_layers(bytes, name)
             }
-            LayerSource::Glb { bytes, name } => crate::bake::read_layers(bytes, name)?,
         };
-        image_error(geom, self.job(), placement, &layers, opts)
+        image_error(geom, self.job(), placement, layers, opts)
     }
 }
 
@@ -445,11 +624,15 @@ mod tests {
     #[test]
     fn psnr_of_known_difference() {
         let a = vec![10u8, 10, 10, 255, 20, 20, 20, 255];
-        assert_eq!(psnr_db(&a, &a), 100.0);
+        assert_eq!(psnr_db(&a, &a, &[true; 2]), 100.0);
         let b = vec![20u8, 10, 10, 255, 20, 20, 20, 255];
         // MSE = 100 / 6.
         let expect = 10.0 * (255.0f64 * 255.0 / (100.0 / 6.0)).log10();
-        assert!((psnr_db(&a, &b) - expect).abs() < 1e-9);
+        assert!((psnr_db(&a, &b, &[true; 2]) - expect).abs() < 1e-9);
+        // Over the first pixel only: MSE = 100 / 3.
+        let first = 10.0 * (255.0f64 * 255.0 / (100.0 / 3.0)).log10();
+        assert!((psnr_db(&a, &b, &[true, false]) - first).abs() < 1e-9);
+        assert_eq!(psnr_db(&a, &b, &[false, true]), 100.0);
     }
 
     #[test]
@@ -461,16 +644,39 @@ mod tests {
                 .flat_map(|(x, y)| if f(x, y) { [200, 0, 0, 255] } else { SKY })
                 .collect()
         };
+        let all = vec![true; 64];
         let a = img(&|x, _| x < 4);
         let shifted = img(&|x, _| x < 5);
-        assert_eq!(mismatch_fraction(&a, &shifted, w, h, 8), 0.0);
+        assert_eq!(mismatch_fraction(&a, &shifted, w, h, 8, &all), 0.0);
         let moved = img(&|x, _| x < 6);
         // Column 5 is red in `moved` with no red within one pixel in `a`, and
         // column 4 is sky in `a` with no sky within one pixel in `moved`.
-        assert_eq!(mismatch_fraction(&a, &moved, w, h, 8), 16.0 / 64.0);
+        assert_eq!(mismatch_fraction(&a, &moved, w, h, 8, &all), 16.0 / 64.0);
+        // Over the columns 3 to 6 only (the pixels that changed and their
+        // neighbours): the same 16 bad pixels of 32.
+        let band: Vec<bool> = (0..64).map(|i| (3..7).contains(&(i % 8))).collect();
+        assert_eq!(mismatch_fraction(&a, &moved, w, h, 8, &band), 0.5);
+        assert_eq!(mismatch_fraction(&a, &moved, w, h, 8, &[false; 64]), 0.0);
         // Small colour noise within the tolerance matches.
         let mut noisy = a.clone();
         noisy[0] = 190;
-        assert_eq!(mismatch_fraction(&a, &noisy, w, h, 16), 0.0);
+        assert_eq!(mismatch_fraction(&a, &noisy, w, h, 16, &all), 0.0);
+    }
+
+    #[test]
+    fn coverage_estimate_is_the_projected_disc() {
+        let frustum = ViewFrustum::new(DVec3::ZERO, DVec3::Z, 90.0, 1.0);
+        let f_px = 100.0;
+        // A sphere of radius 1 at distance 10: pi f^2 r^2 / (d^2 - r^2).
+        let disc = std::f64::consts::PI * 1e4 / 99.0;
+        let got = sphere_coverage(&[(DVec3::new(0.0, 0.0, 10.0), 1.0)], &frustum, f_px, 4e4);
+        assert!((got - disc / 4e4).abs() < 1e-12, "{got}");
+        // Behind the camera: nothing; around the eye: everything.
+        let behind = sphere_coverage(&[(DVec3::new(0.0, 0.0, -10.0), 1.0)], &frustum, f_px, 4e4);
+        assert_eq!(behind, 0.0);
+        assert_eq!(
+            sphere_coverage(&[(DVec3::ZERO, 1.0)], &frustum, f_px, 4e4),
+            1.0
+        );
     }
 }
