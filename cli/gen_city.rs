@@ -15,9 +15,15 @@ pub struct GenCityArgs {
     /// Seed.
     #[arg(long, default_value_t = 1)]
     seed: u64,
-    /// Fraction of the full city's area (1 ≈ 1500 × 1000 m, ≥ 5,000 objects).
+    /// Fraction of the full city's area (1 ≈ 1500 × 1000 m, ≥ 5,000 objects;
+    /// at most 16).
     #[arg(long, default_value_t = 1.0)]
     scale: f64,
+    /// Put the city on seeded hills up to this many metres high (0: flat).
+    /// Objects and their ids are those of the flat city, lifted onto the
+    /// ground.
+    #[arg(long, default_value_t = 0.0)]
+    hills: f64,
     /// Write the JSON scene summary instead of the GLB.
     #[arg(long)]
     summary: bool,
@@ -44,6 +50,7 @@ pub fn run(a: GenCityArgs) -> Result<ExitCode> {
             seed: a.seed,
             scale: a.scale,
             lod: a.lod,
+            hills: a.hills,
         })?
     };
     if a.summary {

@@ -23,6 +23,7 @@ fn main() -> optimizer::Result<()> {
         seed: 1,
         scale,
         lod: false,
+        ..Default::default()
     })?;
     let geom = load_geometry_bytes(&glb, "city")?;
     println!(

@@ -43,6 +43,7 @@ async fn main() -> std::io::Result<()> {
         seed: 1,
         scale: 1.0,
         lod: false,
+        ..Default::default()
     })
     .map_err(std::io::Error::other)?;
     let scene = optimizer::scene::gltf_load::load_scene_bytes(&glb, "city")

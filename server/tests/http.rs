@@ -22,6 +22,7 @@ fn city(scale: f64) -> Vec<u8> {
         seed: 1,
         scale,
         lod: false,
+        ..Default::default()
     })
     .unwrap()
 }

@@ -61,6 +61,7 @@ fn kill_9_and_restart_finishes_every_job() {
         seed: 1,
         scale: 0.1,
         lod: false,
+        ..Default::default()
     })
     .unwrap();
     let scene = optimizer::scene::gltf_load::load_scene_bytes(&glb, "c").unwrap();

@@ -48,6 +48,7 @@ pub fn generate_failure(seed: u64) -> Result<Vec<u8>> {
         roots: Vec::new(),
         counter: Default::default(),
         lods: &no_lods,
+        terrain: None,
     };
     p.put("ground", ground, [0.0; 3], 0.0, [1.0; 3])?;
     for side in [-1.0f64, 1.0] {

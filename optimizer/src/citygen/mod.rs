@@ -47,6 +47,7 @@
 mod failure;
 mod meshes;
 mod streets;
+mod terrain;
 
 pub use failure::generate_failure;
 
@@ -63,19 +64,24 @@ use crate::scene::glb::{GeometryId, GlbBuilder, MeshPrimitive, Node};
 use crate::scene::material::Material;
 use meshes::{FlatFaces, add_geometry, add_mesh, bench, bin, building, car, kiosk, lamp, tree};
 use streets::{ProtoLod, Street};
+use terrain::Terrain;
 
 /// Generator parameters.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct CityParams {
     /// Seed: the same seed, scale and `lod` give byte-identical output.
     pub seed: u64,
-    /// Fraction of the full city's area, in `(0, 4]`; lengths scale by its
+    /// Fraction of the full city's area, in `(0, 16]`; lengths scale by its
     /// square root.
     pub scale: f64,
     /// Give street objects `MSFT_lod` levels of detail (see the module
     /// docs). Objects, their ids and their full-detail geometry do not
     /// change.
     pub lod: bool,
+    /// Height of the hills, metres (0: flat). The city then stands on
+    /// seeded hills (`terrain`); objects and ids are those of the flat city,
+    /// lifted onto the ground.
+    pub hills: f64,
 }
 
 impl Default for CityParams {
@@ -84,6 +90,7 @@ impl Default for CityParams {
             seed: 1,
             scale: 1.0,
             lod: false,
+            hills: 0.0,
         }
     }
 }
@@ -108,7 +115,13 @@ struct Prototypes {
     lods: BTreeMap<u32, ProtoLod>,
 }
 
-fn prototypes(b: &mut GlbBuilder, rng: &mut Rng, size: [f64; 2], lod: bool) -> Result<Prototypes> {
+fn prototypes(
+    b: &mut GlbBuilder,
+    rng: &mut Rng,
+    size: [f64; 2],
+    lod: bool,
+    terrain: Option<&Terrain>,
+) -> Result<Prototypes> {
     let mat = |b: &mut GlbBuilder, name: &str, c: [f32; 3]| {
         b.add_material(&Material::new(name, [c[0], c[1], c[2], 1.0]))
     };
@@ -233,11 +246,17 @@ fn prototypes(b: &mut GlbBuilder, rng: &mut Rng, size: [f64; 2], lod: bool) -> R
         vec![metal],
     ));
     let bins = vec![add_mesh(b, "bin_proto", &[(&bin(12, 2), metal)])?];
-    let mut g = MeshData::default();
-    g.cuboid(
-        Vec3::new(0.0, -0.2, 0.0),
-        Vec3::new(size[0] as f32, 0.0, size[1] as f32),
-    );
+    let g = match terrain {
+        Some(t) => t.ground(size),
+        None => {
+            let mut g = MeshData::default();
+            g.cuboid(
+                Vec3::new(0.0, -0.2, 0.0),
+                Vec3::new(size[0] as f32, 0.0, size[1] as f32),
+            );
+            g
+        }
+    };
     let ground = add_mesh(b, "ground", &[(&g, asphalt)])?;
     // Levels of detail come after every full-detail mesh, so those keep
     // their indices; a level's geometry is written once and shared by the
@@ -335,6 +354,7 @@ struct Placer<'a> {
     roots: Vec<u32>,
     counter: BTreeMap<&'static str, u32>,
     lods: &'a BTreeMap<u32, ProtoLod>,
+    terrain: Option<&'a Terrain>,
 }
 
 impl Placer<'_> {
@@ -349,7 +369,21 @@ impl Placer<'_> {
         let n = self.counter.entry(kind).or_insert(0);
         let name = format!("{kind}_{:04}", *n);
         *n += 1;
-        let translation = [t[0] as f32, t[1] as f32, t[2] as f32];
+        // On hills: a building on the lowest point of its footprint (its
+        // origin is a corner, its scale the footprint), anything else on
+        // the ground at its origin; the ground is the terrain itself.
+        let lift = match self.terrain {
+            Some(_) if kind == "ground" => 0.0,
+            Some(terrain) if kind == "building" => terrain.lowest(
+                t[0],
+                t[0] + f64::from(scale[0]),
+                t[2],
+                t[2] + f64::from(scale[2]),
+            ),
+            Some(terrain) => terrain.height(t[0], t[2]),
+            None => 0.0,
+        };
+        let translation = [t[0] as f32, (t[1] + lift) as f32, t[2] as f32];
         let mut node = Node::new(&name)
             .with_mesh(mesh)
             .with_trs(translation, yaw(rot), scale);
@@ -385,13 +419,21 @@ impl Placer<'_> {
 /// Generates the city as GLB bytes.
 pub fn generate(params: &CityParams) -> Result<Vec<u8>> {
     let scale = params.scale;
-    if !(scale.is_finite() && scale > 0.0 && scale <= 4.0) {
-        return Err(Error::bad("--scale", format!("{scale} must be in (0, 4]")));
+    if !(scale.is_finite() && scale > 0.0 && scale <= 16.0) {
+        return Err(Error::bad("--scale", format!("{scale} must be in (0, 16]")));
+    }
+    let hills = params.hills;
+    if !(hills.is_finite() && (0.0..=500.0).contains(&hills)) {
+        return Err(Error::bad(
+            "--hills",
+            format!("{hills} must be between 0 and 500 metres"),
+        ));
     }
     let size = city_size(scale);
+    let terrain = (hills > 0.0).then(|| Terrain::new(params.seed, size, hills));
     let mut rng = Rng::new(params.seed);
     let mut b = GlbBuilder::new();
-    let protos = prototypes(&mut b, &mut rng, size, params.lod)?;
+    let protos = prototypes(&mut b, &mut rng, size, params.lod, terrain.as_ref())?;
     let (xblocks, xstreets) = blocks_along(&mut rng, size[0]);
     let (zblocks, zstreets) = blocks_along(&mut rng, size[1]);
     let mut p = Placer {
@@ -399,6 +441,7 @@ pub fn generate(params: &CityParams) -> Result<Vec<u8>> {
         roots: Vec::new(),
         counter: Default::default(),
         lods: &protos.lods,
+        terrain: terrain.as_ref(),
     };
     p.put("ground", protos.ground, [0.0; 3], 0.0, [1.0; 3])?;
     let pick = |rng: &mut Rng, v: &[u32]| v[(rng.next_u64() % v.len() as u64) as usize];
@@ -575,7 +618,13 @@ mod tests {
     use crate::scene::gltf_load::load_scene_bytes;
 
     fn city(seed: u64, scale: f64, lod: bool) -> Vec<u8> {
-        generate(&CityParams { seed, scale, lod }).unwrap()
+        generate(&CityParams {
+            seed,
+            scale,
+            lod,
+            hills: 0.0,
+        })
+        .unwrap()
     }
 
     /// FNV-1a, 64 bits, of a GLB's content: its glTF document as
@@ -718,16 +767,56 @@ mod tests {
 
     #[test]
     fn bad_scale_is_rejected() {
-        for s in [0.0, -1.0, f64::NAN, 5.0] {
-            let e = generate(&CityParams {
-                seed: 1,
+        let error = |p: CityParams| generate(&p).map(|_| ()).unwrap_err().to_string();
+        for s in [0.0, -1.0, f64::NAN, 16.5] {
+            let e = error(CityParams {
                 scale: s,
-                lod: false,
-            })
-            .unwrap_err()
-            .to_string();
+                ..Default::default()
+            });
             assert!(e.contains("--scale"), "{e}");
         }
+        for h in [-1.0, f64::INFINITY, 501.0] {
+            let e = error(CityParams {
+                scale: 0.01,
+                hills: h,
+                ..Default::default()
+            });
+            assert!(e.contains("--hills"), "{e}");
+        }
+    }
+
+    #[test]
+    fn hills_lift_every_object_onto_the_ground() {
+        let flat = load_scene_bytes(&city(2, 0.05, false), "flat").unwrap();
+        let glb = generate(&CityParams {
+            seed: 2,
+            scale: 0.05,
+            hills: 40.0,
+            ..Default::default()
+        })
+        .unwrap();
+        let hilly = load_scene_bytes(&glb, "hilly").unwrap();
+        assert_eq!(hilly.objects.len(), flat.objects.len());
+        let size = city_size(0.05);
+        let terrain = Terrain::new(2, size, 40.0);
+        let mut lifted = 0;
+        for (h, f) in hilly.objects.iter().zip(&flat.objects) {
+            // Same footprint, raised by a ground height under it (the
+            // lowest point of a building's footprint, the height at any
+            // other object's origin).
+            assert!((h.min.x - f.min.x).abs() < 1e-3 && (h.min.z - f.min.z).abs() < 1e-3);
+            let lift = h.min.y - f.min.y;
+            let under = [f.min.x, 0.5 * (f.min.x + f.max.x), f.max.x]
+                .into_iter()
+                .flat_map(|x| {
+                    [f.min.z, 0.5 * (f.min.z + f.max.z), f.max.z].map(|z| terrain.height(x, z))
+                });
+            let highest = under.fold(0.0, f64::max);
+            assert!(lift > 0.0 && lift <= highest + 1e-3, "{}: {lift}", f.name);
+            lifted += 1;
+        }
+        assert!(lifted > 100);
+        load_geometry_bytes(&glb, "hilly").unwrap();
     }
 
     #[test]

@@ -569,6 +569,7 @@ mod tests {
             seed: 2,
             scale: 0.05,
             lod: false,
+            ..Default::default()
         })
         .unwrap();
         let scene = load_scene_bytes(&glb, "city").unwrap();
@@ -684,6 +685,7 @@ mod tests {
             seed: 1,
             scale: 0.01,
             lod: false,
+            ..Default::default()
         })
         .unwrap();
         // Flips in the header and JSON chunk reach the parser and the
