@@ -32,6 +32,7 @@ use crate::bake::{Layer, cluster_triangles, geom_objects, surface};
 use crate::input::Prepared;
 use crate::math::geom::{ViewFrustum, face_direction};
 use crate::math::rng::Rng;
+use crate::model::cost::CostModel;
 use crate::render::raster::{Raster, Surface, TextureRef, Vertex, View};
 use crate::scene::geometry::SceneGeometry;
 use crate::scene::material::Wrap;
@@ -267,21 +268,20 @@ struct Chosen {
     dir: DVec3,
 }
 
-/// Share of a `w × h` image covered by the discs of `spheres` seen from
-/// `frustum` (an estimate: overlaps are counted twice; at most 1).
-fn sphere_coverage(spheres: &[(DVec3, f64)], frustum: &ViewFrustum, f_px: f64, pixels: f64) -> f64 {
-    let mut covered = 0.0;
-    for &(c, r) in spheres {
-        if !frustum.intersects_sphere(c, r) {
-            continue;
-        }
-        let d = (c - frustum.eye()).length();
-        if d <= r {
-            return 1.0;
-        }
-        covered += std::f64::consts::PI * f_px * f_px * r * r / (d * d - r * r);
-    }
-    (covered / pixels).min(1.0)
+/// Share of the image covered by the discs of `spheres` seen from
+/// `frustum`, each as the cost model counts its pixels (an estimate:
+/// overlaps are counted twice; at most 1).
+fn sphere_coverage(
+    spheres: impl IntoIterator<Item = (DVec3, f64)>,
+    frustum: &ViewFrustum,
+    cost: &CostModel,
+) -> f64 {
+    let covered: f64 = spheres
+        .into_iter()
+        .filter(|&(c, r)| frustum.intersects_sphere(c, r))
+        .map(|(c, r)| cost.pixels(r, (c - frustum.eye()).length()))
+        .sum();
+    (covered / cost.screen_px).min(1.0)
 }
 
 /// Draws the views to compare: per view, the candidate (of [`CANDIDATES`])
@@ -294,8 +294,7 @@ fn choose_views(
 ) -> Vec<Chosen> {
     let [w, h] = job.camera.resolution;
     let aspect = f64::from(w) / f64::from(h);
-    let f_px = 0.5 * f64::from(h) / (0.5 * job.camera.fov_deg.to_radians()).tan();
-    let pixels = f64::from(w) * f64::from(h);
+    let cost = CostModel::new(job);
     let pitch = job.view_space.pitch_deg.map(f64::to_radians);
     (0..opts.views)
         .into_par_iter()
@@ -342,15 +341,11 @@ fn choose_views(
                     continue;
                 }
                 let frustum = ViewFrustum::new(eye, dir, job.camera.fov_deg, aspect);
-                let spheres: Vec<(DVec3, f64)> = cpv
-                    .impostors
-                    .iter()
-                    .map(|&k| {
-                        let s = &placement.impostors[k as usize].sphere;
-                        (DVec3::from_array(s.center), s.radius)
-                    })
-                    .collect();
-                let estimate = sphere_coverage(&spheres, &frustum, f_px, pixels);
+                let spheres = cpv.impostors.iter().map(|&k| {
+                    let s = &placement.impostors[k as usize].sphere;
+                    (DVec3::from_array(s.center), s.radius)
+                });
+                let estimate = sphere_coverage(spheres, &frustum, &cost);
                 if best.as_ref().is_none_or(|(b, _)| estimate > *b) {
                     best = Some((
                         estimate,
@@ -666,17 +661,16 @@ mod tests {
     #[test]
     fn coverage_estimate_is_the_projected_disc() {
         let frustum = ViewFrustum::new(DVec3::ZERO, DVec3::Z, 90.0, 1.0);
-        let f_px = 100.0;
+        let mut cost = CostModel::new(&Job::with_view_space([0.0; 3], [1.0; 3]));
+        cost.focal_px = 100.0;
+        cost.screen_px = 4e4;
         // A sphere of radius 1 at distance 10: pi f^2 r^2 / (d^2 - r^2).
         let disc = std::f64::consts::PI * 1e4 / 99.0;
-        let got = sphere_coverage(&[(DVec3::new(0.0, 0.0, 10.0), 1.0)], &frustum, f_px, 4e4);
+        let got = sphere_coverage([(DVec3::new(0.0, 0.0, 10.0), 1.0)], &frustum, &cost);
         assert!((got - disc / 4e4).abs() < 1e-12, "{got}");
         // Behind the camera: nothing; around the eye: everything.
-        let behind = sphere_coverage(&[(DVec3::new(0.0, 0.0, -10.0), 1.0)], &frustum, f_px, 4e4);
+        let behind = sphere_coverage([(DVec3::new(0.0, 0.0, -10.0), 1.0)], &frustum, &cost);
         assert_eq!(behind, 0.0);
-        assert_eq!(
-            sphere_coverage(&[(DVec3::ZERO, 1.0)], &frustum, f_px, 4e4),
-            1.0
-        );
+        assert_eq!(sphere_coverage([(DVec3::ZERO, 1.0)], &frustum, &cost), 1.0);
     }
 }
