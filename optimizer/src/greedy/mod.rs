@@ -105,6 +105,11 @@ struct State<'a> {
     /// solved CPV adds nothing to any score, so cells without unsolved CPVs
     /// are skipped when scoring.
     unsolved_in_cell: Vec<u32>,
+    /// Per kd node (cell): the number of choices after which one of its
+    /// CPVs last changed (0: never). A score depends only on the CPVs it
+    /// serves, so a key computed after choice `v` is still exact while no
+    /// cell it serves changed after `v`.
+    cell_changed: Vec<u64>,
     sel: Selection,
 }
 
@@ -149,6 +154,7 @@ impl<'a> State<'a> {
                 }
                 v
             },
+            cell_changed: vec![0; pv.kd.len()],
             sel: Selection {
                 cpv_impostors: vec![Vec::new(); pv.cpvs.len()],
                 cpv_cost: pv.cpvs.iter().map(|c| c.cost).collect(),
@@ -315,8 +321,18 @@ impl<'a> State<'a> {
                 self.unsolved_in_cell[cpv.kd as usize] -= 1;
             }
             self.sel.cpv_cost[cu] = cost;
+            self.cell_changed[cpv.kd as usize] = self.sel.accepted + 1;
         }
         self.sel.accepted += 1;
+    }
+
+    /// True when no cell candidate `i` serves changed after choice
+    /// `stamp`: a score computed then is still exact.
+    fn unchanged_since(&self, i: u32, stamp: u64) -> bool {
+        let all = self.all;
+        all.served[self.cands[i as usize].served.indices()]
+            .iter()
+            .all(|&g| self.cell_changed[all.groups[g as usize].kd as usize] <= stamp)
     }
 }
 
@@ -422,7 +438,7 @@ pub fn select_lazy(
             heap.pop();
             continue;
         }
-        if stamp == version {
+        if stamp == version || st.unchanged_since(top.id, stamp) {
             heap.pop();
             st.accept(top.id);
             version += 1;
@@ -431,14 +447,16 @@ pub fn select_lazy(
             }
             continue;
         }
-        // Recompute the stale keys at the top, up to a batch, in parallel.
+        // Recompute the stale keys at the top, up to a batch, in parallel;
+        // a key whose cells did not change since it was computed is exact
+        // and ends the batch.
         stale.clear();
         while stale.len() < batch {
             match heap.peek() {
                 Some(&(k, s)) if s < latest[k.id as usize] => {
                     heap.pop();
                 }
-                Some(&(k, s)) if s != version => {
+                Some(&(k, s)) if s != version && !st.unchanged_since(k.id, s) => {
                     heap.pop();
                     let b = blocks[k.id as usize].start;
                     if !stale.contains(&b) {
