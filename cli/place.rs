@@ -32,6 +32,18 @@ pub struct PlaceArgs {
     /// Placement method (overrides the job's `method`).
     #[arg(long)]
     method: Option<MethodArg>,
+    /// Refuse the job when its predicted peak memory exceeds this many GB
+    /// (default: the machine's memory).
+    #[arg(long, value_name = "GB", value_parser = parse_gb)]
+    max_memory_gb: Option<u64>,
+}
+
+/// A positive number of GB, as bytes.
+fn parse_gb(s: &str) -> std::result::Result<u64, String> {
+    match s.parse::<f64>() {
+        Ok(g) if g.is_finite() && g > 0.0 && g <= 1e9 => Ok((g * 1e9) as u64),
+        _ => Err(format!("expected a positive number of GB, got {s:?}")),
+    }
 }
 
 pub fn run(a: PlaceArgs) -> Result<ExitCode> {
@@ -46,7 +58,7 @@ pub fn run(a: PlaceArgs) -> Result<ExitCode> {
     let output = prepared.place(
         &PlaceOptions {
             prune: a.prune,
-            max_pairs: None,
+            max_memory_bytes: a.max_memory_gb,
         },
         &Control::observed(&observer),
     )?;

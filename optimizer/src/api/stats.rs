@@ -45,6 +45,13 @@ pub struct Stats {
     pub seconds: Vec<StageTime>,
     /// Peak resident memory of the process, bytes (Linux only; 0 elsewhere).
     pub peak_rss_bytes: u64,
+    /// Peak memory predicted once the problem views are known (before the
+    /// candidates and the greedy, which hold the (CPV, cluster) pairs), bytes.
+    #[serde(default)]
+    pub predicted_peak_bytes: u64,
+    /// Score evaluations per greedy choice.
+    #[serde(default)]
+    pub evaluations_per_choice: f64,
     /// From-region visibility (absent when the job's mode is `none`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub visibility: Option<crate::api::stats::VisibilityStats>,

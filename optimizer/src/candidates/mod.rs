@@ -32,8 +32,9 @@ use rayon::prelude::*;
 use crate::api::job::{Job, Method};
 use crate::math::IdRange;
 use crate::math::geom::Aabb;
+use crate::model::cost::Cost;
 use crate::model::impostor::{ImpostorModel, ImpostorSpec, ViewCell};
-use crate::views::{Context, ProblemViews};
+use crate::views::{Context, Counters, ProblemViews, RegionCosts, cpv_clusters};
 
 /// One impostor candidate.
 #[derive(Clone, Debug)]
@@ -53,17 +54,24 @@ pub struct Candidate {
 /// The generated candidates, ordered by (node, key): ids are indices, and
 /// the serving relation at cell granularity.
 ///
-/// A *group* is one cell's CPVs that list one cluster: a range of `pairs`,
-/// each pair a CPV id and the cluster's index in that CPV's `node_ids`. A
-/// candidate serves a list of groups (`served`), all of its own cluster.
+/// A *pair* is a cluster listed by a CPV (see [`crate::views::cpv_clusters`]);
+/// pairs are stored grouped by cluster, CPV ids ascending within a cluster,
+/// as two flat arrays (the CPV and the cost of the cluster's objects in its
+/// enclosing frustum). A *group* is one cell's CPVs that list one cluster: a
+/// range of pairs. A candidate serves a list of groups (`served`), all of
+/// its own cluster.
 #[derive(Clone, Debug, Default)]
 pub struct Candidates {
     /// The candidates.
     pub list: Vec<Candidate>,
-    /// (CPV id, index of the cluster in the CPV's `node_ids`), grouped by
-    /// cluster and then by cell.
-    pub pairs: Vec<(u32, u32)>,
-    /// Groups: ranges of `pairs`, each with its cell and distance.
+    /// Per pair: the CPV id.
+    pub pair_cpv: Vec<u32>,
+    /// Per pair: the cost of the cluster's objects in the CPV's enclosing
+    /// frustum.
+    pub pair_cost: Vec<Cost>,
+    /// Per cluster (node id): its pairs are `node_pairs[n]..node_pairs[n + 1]`.
+    pub node_pairs: Vec<u32>,
+    /// Groups: ranges of pairs, each with its cell and distance.
     pub groups: Vec<Group>,
     /// Group ids served by the candidates (see `Candidate::served`).
     pub served: Vec<u32>,
@@ -72,7 +80,7 @@ pub struct Candidates {
 /// One cell's CPVs that list one cluster.
 #[derive(Clone, Copy, Debug)]
 pub struct Group {
-    /// Its pairs: `Candidates::pairs[pairs.start..pairs.end]`.
+    /// Its pairs: `pairs.start..pairs.end` of `Candidates::pair_cpv`.
     pub pairs: IdRange,
     /// The cell (kd leaf) of the CPVs.
     pub kd: u32,
@@ -82,17 +90,90 @@ pub struct Group {
 }
 
 impl Candidates {
-    /// Calls `f(cpv id, index of the cluster in the CPV's node_ids)` for every
-    /// CPV candidate `i` may serve (its region lies in the view cell, it lists
-    /// the cluster, and the impostor may accelerate its cell).
+    /// Calls `f(cpv id, pair index)` for every CPV candidate `i` may serve
+    /// (its region lies in the view cell, it lists the cluster, and the
+    /// impostor may accelerate its cell).
     pub fn for_each_served(&self, i: u32, mut f: impl FnMut(u32, u32)) {
         for &g in &self.served[self.list[i as usize].served.indices()] {
-            let gr = self.groups[g as usize];
-            for &(c, idx) in &self.pairs[gr.pairs.indices()] {
-                f(c, idx);
+            for p in self.groups[g as usize].pairs.indices() {
+                f(self.pair_cpv[p], p as u32);
             }
         }
     }
+
+    /// The cost of cluster `node`'s objects in CPV `cpv`'s enclosing
+    /// frustum, if the CPV lists it.
+    pub fn pair_cost_of(&self, node: u32, cpv: u32) -> Option<Cost> {
+        let (a, b) = (
+            self.node_pairs[node as usize] as usize,
+            self.node_pairs[node as usize + 1] as usize,
+        );
+        let k = self.pair_cpv[a..b].binary_search(&cpv).ok()?;
+        Some(self.pair_cost[a + k])
+    }
+}
+
+/// The (cluster, CPV) pairs of `pv`, grouped by cluster with CPV ids
+/// ascending: `(node_pairs, pair_cpv, pair_cost)` as in [`Candidates`]. The
+/// CPVs' cluster lists are computed again a few cells at a time (in
+/// parallel) and scattered into place, so no more than those few cells'
+/// lists are held besides the pairs.
+fn collect_pairs(ctx: &Context, pv: &ProblemViews) -> (Vec<u32>, Vec<u32>, Vec<Cost>) {
+    let n_nodes = ctx.hierarchy.nodes.len();
+    let mut node_pairs = Vec::with_capacity(n_nodes + 1);
+    let mut total = 0u32;
+    node_pairs.push(0);
+    for &c in &pv.node_pairs {
+        total = total
+            .checked_add(c)
+            .expect("the memory check caps the pairs below u32::MAX");
+        node_pairs.push(total);
+    }
+    let mut pair_cpv = vec![u32::MAX; total as usize];
+    let mut pair_cost = vec![Cost::default(); total as usize];
+    let mut fill: Vec<u32> = node_pairs[..n_nodes].to_vec();
+    // Cells with CPVs: ranges of CPV ids (a cell's CPVs are contiguous).
+    let mut cells: Vec<IdRange> = Vec::new();
+    for (i, c) in pv.cpvs.iter().enumerate() {
+        match cells.last_mut() {
+            Some(r) if pv.cpvs[r.start as usize].kd == c.kd => r.end = i as u32 + 1,
+            _ => cells.push(IdRange::new(i as u32, i as u32 + 1)),
+        }
+    }
+    let lods = Counters::new();
+    for chunk in cells.chunks(16) {
+        if ctx.cancelled() {
+            break;
+        }
+        let lists: Vec<Vec<Vec<(u32, Cost)>>> = chunk
+            .par_iter()
+            .map(|r| {
+                let first = &pv.cpvs[r.start as usize];
+                let node = &pv.kd[first.kd as usize];
+                let visible = ctx.visibility.and_then(|v| v.region(node.lo, node.hi));
+                let costs = RegionCosts::new(ctx, &first.region, visible.as_deref(), &lods);
+                pv.cpvs[r.indices()]
+                    .iter()
+                    .map(|c| {
+                        let (cost, list) = cpv_clusters(ctx, &costs, &c.region, &c.vdi);
+                        debug_assert_eq!((cost, list.len()), (c.cost, c.listed as usize));
+                        list
+                    })
+                    .collect()
+            })
+            .collect();
+        for (r, lists) in chunk.iter().zip(lists) {
+            for (ci, list) in r.indices().zip(lists) {
+                for (n, cost) in list {
+                    let at = fill[n as usize] as usize;
+                    pair_cpv[at] = ci as u32;
+                    pair_cost[at] = cost;
+                    fill[n as usize] += 1;
+                }
+            }
+        }
+    }
+    (node_pairs, pair_cpv, pair_cost)
 }
 
 /// Axis grid of shaft directions: azimuth steps always, elevation steps when
@@ -311,37 +392,22 @@ pub fn generate(ctx: &Context, job: &Job, pv: &ProblemViews) -> Candidates {
     let steps = job.candidates.min_distance_steps.max(1);
     let last_k = job.candidates.min_distance_doublings.saturating_mul(steps);
 
-    // Invert the (CPV → clusters) lists into (cluster → CPVs), then split
-    // each cluster's list into groups of one cell (CPVs of one cell are
-    // contiguous, so the groups are too).
-    let mut count = vec![0u32; h.nodes.len() + 1];
-    for c in &pv.cpvs {
-        for &n in &c.node_ids {
-            count[n as usize + 1] += 1;
-        }
+    // The (cluster → CPVs) pairs, then each cluster's split into groups of
+    // one cell (CPVs of one cell are contiguous, so the groups are too).
+    let (node_pairs, pair_cpv, pair_cost) = collect_pairs(ctx, pv);
+    if ctx.cancelled() {
+        return Candidates::default();
     }
-    for i in 1..count.len() {
-        count[i] += count[i - 1];
-    }
-    let mut pairs: Vec<(u32, u32)> = vec![(0, 0); count[h.nodes.len()] as usize];
-    let mut fill = count.clone();
-    for (ci, c) in pv.cpvs.iter().enumerate() {
-        for (idx, &n) in c.node_ids.iter().enumerate() {
-            pairs[fill[n as usize] as usize] = (ci as u32, idx as u32);
-            fill[n as usize] += 1;
-        }
-    }
-    drop(fill);
     let mut groups: Vec<Group> = Vec::new();
     let mut node_groups = vec![(0u32, 0u32); h.nodes.len()];
     for n in 0..h.nodes.len() {
         let g0 = groups.len() as u32;
-        let (a, b) = (count[n] as usize, count[n + 1] as usize);
+        let (a, b) = (node_pairs[n] as usize, node_pairs[n + 1] as usize);
         let center = h.nodes[n].sphere.center;
         let mut s = a;
         for k in a + 1..=b {
-            if k == b || pv.cpvs[pairs[k].0 as usize].kd != pv.cpvs[pairs[s].0 as usize].kd {
-                let first = &pv.cpvs[pairs[s].0 as usize];
+            if k == b || pv.cpvs[pair_cpv[k] as usize].kd != pv.cpvs[pair_cpv[s] as usize].kd {
+                let first = &pv.cpvs[pair_cpv[s] as usize];
                 groups.push(Group {
                     pairs: IdRange::new(s as u32, k as u32),
                     kd: first.kd,
@@ -367,7 +433,7 @@ pub fn generate(ctx: &Context, job: &Job, pv: &ProblemViews) -> Candidates {
             let corner_dirs: Vec<[DVec3; 8]> = (g0..g1)
                 .map(|g| {
                     let gr = groups[g as usize];
-                    let region = pv.cpvs[pairs[gr.pairs.start as usize].0 as usize].region;
+                    let region = pv.cpvs[pair_cpv[gr.pairs.start as usize] as usize].region;
                     region.corners().map(|p| (p - sphere.center).normalize())
                 })
                 .collect();
@@ -376,18 +442,15 @@ pub fn generate(ctx: &Context, job: &Job, pv: &ProblemViews) -> Candidates {
             let mut tuples: Vec<(Key, u32)> = Vec::new();
             for g in g0..g1 {
                 let gr = groups[g as usize];
-                let group = &pairs[gr.pairs.indices()];
-                let first = &pv.cpvs[group[0].0 as usize];
+                let first = &pv.cpvs[pair_cpv[gr.pairs.start as usize] as usize];
                 let region = first.region;
                 let dist = gr.dist;
                 // Some CPV of the cell is accelerated by an impostor of `spec`.
                 let helps = |spec: &ImpostorSpec| {
                     let imp = ctx.model.impostor(spec.layers, sphere.radius, dist);
-                    group.iter().any(|&(ci, idx)| {
-                        let c = &pv.cpvs[ci as usize];
-                        let cur = c.cost;
-                        ctx.model.frame_time(cur - c.node_costs[idx as usize] + imp)
-                            < ctx.model.frame_time(cur)
+                    gr.pairs.indices().any(|p| {
+                        let cur = pv.cpvs[pair_cpv[p] as usize].cost;
+                        ctx.model.frame_time(cur - pair_cost[p] + imp) < ctx.model.frame_time(cur)
                     })
                 };
                 if shafts && size > 0.0 && dist >= size {
@@ -612,7 +675,9 @@ pub fn generate(ctx: &Context, job: &Job, pv: &ProblemViews) -> Candidates {
     }
     Candidates {
         list,
-        pairs,
+        pair_cpv,
+        pair_cost,
+        node_pairs,
         groups,
         served,
     }

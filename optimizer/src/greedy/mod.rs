@@ -29,7 +29,6 @@ use rayon::prelude::*;
 
 use crate::candidates::{Candidate, Candidates};
 use crate::math::IdRange;
-use crate::math::geom::Sphere;
 use crate::model::cost::Cost;
 use crate::views::{Context, Cpv, ProblemViews};
 
@@ -89,18 +88,17 @@ struct State<'a> {
     pv: &'a ProblemViews,
     cands: &'a [Candidate],
     all: &'a Candidates,
-    /// Start of each CPV's entries in the flat per-(CPV, listed cluster)
-    /// arrays below.
-    offsets: Vec<u32>,
-    /// Per (CPV, listed cluster): the cost of the cluster's current
-    /// representation (its objects, with descendant impostors swapped in).
-    rep: Vec<Cost>,
-    /// Per (CPV, listed cluster): represented by an impostor of itself or of
-    /// an ancestor.
-    covered: Vec<bool>,
-    /// Per (CPV, listed cluster): the index in the CPV's list of its nearest
-    /// listed ancestor, or `u32::MAX`.
-    up: Vec<u32>,
+    /// Per CPV: for its adjusted clusters, in node order, what the
+    /// impostors placed below them save against their objects.
+    adjustments: Vec<Vec<Cost>>,
+    /// Per (CPV, cluster): covered when an impostor of the cluster or an
+    /// ancestor is placed there (a subtree is a range of pre-order ids),
+    /// adjusted when one of a descendant is, so its representation is its
+    /// objects' cost minus its adjustment (set on the whole ancestor chain
+    /// of every impostor).
+    marks: NodeMarks,
+    /// Per CPV, one bit: within `t_max` (it adds nothing to any score).
+    solved: Vec<u64>,
     /// Per kd node (cell): how many of its CPVs are still above `t_max`. A
     /// solved CPV adds nothing to any score, so cells without unsolved CPVs
     /// are skipped when scoring.
@@ -111,6 +109,76 @@ struct State<'a> {
     /// cell it serves changed after `v`.
     cell_changed: Vec<u64>,
     sel: Selection,
+}
+
+/// Two bits per (CPV, hierarchy node), covered and adjusted (see
+/// [`State`]), with a rank directory over the adjusted bits: a cluster's
+/// adjustment sits at its rank in the CPV's `adjustments`. Per 64 nodes,
+/// three adjacent words (covered, adjusted, adjusted bits before them in
+/// the row), so one cache line answers a lookup: under half a byte per
+/// (CPV, node) where the per-pair state it replaces took 21 bytes a pair.
+struct NodeMarks {
+    /// Words per CPV.
+    row: usize,
+    bits: Vec<u64>,
+}
+
+/// What [`NodeMarks`] says of a (CPV, cluster).
+#[derive(PartialEq)]
+enum Mark {
+    /// Neither covered nor adjusted: represented by its objects.
+    Plain,
+    Covered,
+    /// Adjusted, with the rank of its adjustment.
+    Adjusted(usize),
+}
+
+impl NodeMarks {
+    fn new(cpvs: usize, nodes: usize) -> Self {
+        let row = 3 * nodes.div_ceil(64);
+        NodeMarks {
+            row,
+            bits: vec![0; cpvs * row],
+        }
+    }
+
+    fn get(&self, c: u32, n: u32) -> Mark {
+        let at = c as usize * self.row + 3 * (n as usize / 64);
+        let b = n % 64;
+        let (cov, adj) = (self.bits[at], self.bits[at + 1]);
+        if cov >> b & 1 == 1 {
+            Mark::Covered
+        } else if adj >> b & 1 == 1 {
+            let below = adj & ((1u64 << b) - 1);
+            Mark::Adjusted(self.bits[at + 2] as usize + below.count_ones() as usize)
+        } else {
+            Mark::Plain
+        }
+    }
+
+    /// Marks `n` adjusted in CPV `c`: its rank, and whether it is new.
+    fn adjust(&mut self, c: u32, n: u32) -> (usize, bool) {
+        let row = &mut self.bits[c as usize * self.row..][..self.row];
+        let at = 3 * (n as usize / 64);
+        let b = n % 64;
+        let rank = row[at + 2] as usize + (row[at + 1] & ((1u64 << b) - 1)).count_ones() as usize;
+        if row[at + 1] >> b & 1 == 1 {
+            return (rank, false);
+        }
+        row[at + 1] |= 1 << b;
+        for later in row[at + 3..].chunks_exact_mut(3) {
+            later[2] += 1;
+        }
+        (rank, true)
+    }
+
+    /// Marks `a..b` covered in CPV `c`.
+    fn cover(&mut self, c: u32, a: u32, b: u32) {
+        let row = &mut self.bits[c as usize * self.row..][..self.row];
+        for n in a..b {
+            row[3 * (n as usize / 64)] |= 1 << (n % 64);
+        }
+    }
 }
 
 /// The effect of impostor `i` on one CPV.
@@ -127,26 +195,17 @@ impl<'a> State<'a> {
             pv,
             cands: &cands.list,
             all: cands,
-            offsets: pv
-                .cpvs
-                .iter()
-                .scan(0u32, |acc, c| {
-                    let o = *acc;
-                    *acc += c.node_ids.len() as u32;
-                    Some(o)
-                })
-                .collect(),
-            rep: pv
-                .cpvs
-                .iter()
-                .flat_map(|c| c.node_costs.iter().copied())
-                .collect(),
-            covered: vec![false; pv.cpvs.iter().map(|c| c.node_ids.len()).sum()],
-            up: pv
-                .cpvs
-                .par_iter()
-                .flat_map_iter(|c| listed_ancestors(ctx, &c.node_ids))
-                .collect(),
+            adjustments: vec![Vec::new(); pv.cpvs.len()],
+            marks: NodeMarks::new(pv.cpvs.len(), ctx.hierarchy.nodes.len()),
+            solved: {
+                let mut v = vec![0u64; pv.cpvs.len().div_ceil(64)];
+                for (i, c) in pv.cpvs.iter().enumerate() {
+                    if c.time <= ctx.t_max {
+                        v[i / 64] |= 1 << (i % 64);
+                    }
+                }
+                v
+            },
             unsolved_in_cell: {
                 let mut v = vec![0u32; pv.kd.len()];
                 for c in &pv.cpvs {
@@ -182,15 +241,23 @@ impl<'a> State<'a> {
         )
     }
 
-    /// The effect on CPV `c` of replacing the cluster listed at `idx` there by
-    /// an impostor costing `imp`.
-    fn effect(&self, c: u32, idx: u32, imp: Cost) -> Option<Effect> {
-        let flat = (self.offsets[c as usize] + idx) as usize;
-        if self.covered[flat] {
-            return None;
+    /// The cost of cluster `node`'s current representation in CPV `c`,
+    /// whose objects there cost `orig`: `None` when an impostor of it or an
+    /// ancestor already represents it.
+    fn representation(&self, c: u32, node: u32, orig: Cost) -> Option<Cost> {
+        match self.marks.get(c, node) {
+            Mark::Covered => None,
+            Mark::Plain => Some(orig),
+            Mark::Adjusted(rank) => Some(orig - self.adjustments[c as usize][rank]),
         }
+    }
+
+    /// The effect on CPV `c` of replacing cluster `node`, listed there as
+    /// pair `p`, by an impostor costing `imp`.
+    fn effect(&self, c: u32, node: u32, p: u32, imp: Cost) -> Option<Effect> {
+        let rep = self.representation(c, node, self.all.pair_cost[p as usize])?;
         let cur = self.sel.cpv_cost[c as usize];
-        let new_cost = cur - self.rep[flat] + imp;
+        let new_cost = cur - rep + imp;
         let m = &self.ctx.model;
         let (t_cur, t_new) = (m.frame_time(cur), m.frame_time(new_cost));
         Some(Effect {
@@ -200,7 +267,7 @@ impl<'a> State<'a> {
         })
     }
 
-    /// Calls `f(cpv, idx, effect)` for every CPV candidate `i` may serve.
+    /// Calls `f(cpv, pair, effect)` for every CPV candidate `i` may serve.
     fn for_each_effect(&self, i: u32, mut f: impl FnMut(u32, u32, Effect)) {
         let all = self.all;
         let cand = &self.cands[i as usize];
@@ -209,9 +276,10 @@ impl<'a> State<'a> {
             let gr = all.groups[g as usize];
             // All CPVs of a group share their region, hence the impostor's cost.
             let imp = self.ctx.model.impostor(cand.spec.layers, s.radius, gr.dist);
-            for &(c, idx) in &all.pairs[gr.pairs.indices()] {
-                if let Some(e) = self.effect(c, idx, imp) {
-                    f(c, idx, e);
+            for p in gr.pairs.indices() {
+                let c = all.pair_cpv[p];
+                if let Some(e) = self.effect(c, cand.node, p as u32, imp) {
+                    f(c, p as u32, e);
                 }
             }
         }
@@ -219,28 +287,29 @@ impl<'a> State<'a> {
 
     fn score(&self, i: u32) -> f64 {
         let c = &self.cands[i as usize];
-        let s = self.ctx.hierarchy.nodes[c.node as usize].sphere;
         let mut sum = 0.0;
-        self.add_gains(s, c.spec.layers, c.served.indices(), &mut sum);
+        self.add_gains(c.node, c.spec.layers, c.served.indices(), &mut sum);
         sum / c.spec.memory_bytes.max(1) as f64
     }
 
     /// Adds to `sum` the gains of the groups `served[groups]` for an
-    /// impostor of `layers` layers of the cluster with sphere `s`, counting
-    /// only CPVs still above `t_max`.
-    fn add_gains(&self, s: Sphere, layers: u32, groups: Range<usize>, sum: &mut f64) {
+    /// impostor of `layers` layers of cluster `node`, counting only CPVs
+    /// still above `t_max`.
+    fn add_gains(&self, node: u32, layers: u32, groups: Range<usize>, sum: &mut f64) {
         let all = self.all;
+        let s = self.ctx.hierarchy.nodes[node as usize].sphere;
         for &g in &all.served[groups] {
             let gr = all.groups[g as usize];
             if self.unsolved_in_cell[gr.kd as usize] == 0 {
                 continue;
             }
             let imp = self.ctx.model.impostor(layers, s.radius, gr.dist);
-            for &(c, idx) in &all.pairs[gr.pairs.indices()] {
-                if self.ctx.model.frame_time(self.sel.cpv_cost[c as usize]) <= self.ctx.t_max {
+            for p in gr.pairs.indices() {
+                let c = all.pair_cpv[p];
+                if self.solved[c as usize / 64] >> (c % 64) & 1 == 1 {
                     continue;
                 }
-                if let Some(e) = self.effect(c, idx, imp) {
+                if let Some(e) = self.effect(c, node, p as u32, imp) {
                     *sum += e.delta;
                 }
             }
@@ -257,12 +326,11 @@ impl<'a> State<'a> {
         let mut j = block.start as usize;
         while j < end as usize {
             let c0 = &self.cands[j];
-            let s = self.ctx.hierarchy.nodes[c0.node as usize].sphere;
             let (mut sum, mut pos) = (0.0, c0.served.start as usize);
             let mut k = j;
             while k < end as usize && self.cands[k].spec.layers == c0.spec.layers {
                 let end = self.cands[k].served.end as usize;
-                self.add_gains(s, c0.spec.layers, pos..end, &mut sum);
+                self.add_gains(c0.node, c0.spec.layers, pos..end, &mut sum);
                 pos = end;
                 out.push(sum / self.cands[k].spec.memory_bytes.max(1) as f64);
                 k += 1;
@@ -274,51 +342,53 @@ impl<'a> State<'a> {
 
     fn accept(&mut self, i: u32) {
         let mut changes: Vec<(u32, u32, Cost)> = Vec::new();
-        self.for_each_effect(i, |c, idx, e| {
+        self.for_each_effect(i, |c, p, e| {
             if e.accelerates {
-                changes.push((c, idx, e.new_cost));
+                changes.push((c, p, e.new_cost));
             }
         });
         let h = self.ctx.hierarchy;
         let node = self.cands[i as usize].node;
         let end = h.nodes[node as usize].subtree_end;
-        for (c, idx, cost) in changes {
+        for (c, p, cost) in changes {
             let cu = c as usize;
             let cpv = &self.pv.cpvs[cu];
-            let idx = idx as usize;
-            let off = self.offsets[cu] as usize;
-            let saving = self.rep[off + idx] - self.impostor_cost(i, cpv);
-            // The cluster and every listed descendant are now represented.
-            for k in idx..cpv.node_ids.len() {
-                if cpv.node_ids[k] >= end {
-                    break;
+            // The impostor replaces the cluster's representation: every
+            // ancestor's gets cheaper by the difference.
+            let rep = self
+                .representation(c, node, self.all.pair_cost[p as usize])
+                .expect("an accelerated CPV does not cover the cluster");
+            let saving = rep - self.impostor_cost(i, cpv);
+            self.marks.cover(c, node, end);
+            let mut up = h.nodes[node as usize].parent;
+            while up != u32::MAX {
+                let (rank, new) = self.marks.adjust(c, up);
+                let adj = &mut self.adjustments[cu];
+                if new {
+                    adj.insert(rank, saving);
+                } else {
+                    adj[rank] = adj[rank] + saving;
                 }
-                self.covered[off + k] = true;
+                up = h.nodes[up as usize].parent;
             }
-            // Every listed ancestor's representation got cheaper.
-            let mut a = self.up[off + idx];
-            while a != u32::MAX {
-                let flat = off + a as usize;
-                self.rep[flat] = self.rep[flat] - saving;
-                a = self.up[flat];
-            }
-            let list = &mut self.sel.cpv_impostors[cu];
+            let imps = &mut self.sel.cpv_impostors[cu];
             let cands = self.cands;
             let uses = &mut self.sel.uses;
-            list.retain(|&j| {
+            imps.retain(|&j| {
                 let replaced = h.is_descendant(cands[j as usize].node, node);
                 if replaced {
                     uses[j as usize] -= 1;
                 }
                 !replaced
             });
-            list.push(i);
+            imps.push(i);
             self.sel.uses[i as usize] += 1;
             let m = &self.ctx.model;
             if m.frame_time(self.sel.cpv_cost[cu]) > self.ctx.t_max
                 && m.frame_time(cost) <= self.ctx.t_max
             {
                 self.unsolved_in_cell[cpv.kd as usize] -= 1;
+                self.solved[cu / 64] |= 1 << (cu % 64);
             }
             self.sel.cpv_cost[cu] = cost;
             self.cell_changed[cpv.kd as usize] = self.sel.accepted + 1;
@@ -334,25 +404,6 @@ impl<'a> State<'a> {
             .iter()
             .all(|&g| self.cell_changed[all.groups[g as usize].kd as usize] <= stamp)
     }
-}
-
-/// For a CPV's cluster list (node ids ascending, i.e. hierarchy pre-order):
-/// per entry, the index of its nearest listed ancestor, or `u32::MAX`.
-fn listed_ancestors(ctx: &Context, ids: &[u32]) -> Vec<u32> {
-    let nodes = &ctx.hierarchy.nodes;
-    let mut up = Vec::with_capacity(ids.len());
-    let mut open: Vec<u32> = Vec::new();
-    for &n in ids {
-        while let Some(&top) = open.last() {
-            if n < nodes[ids[top as usize] as usize].subtree_end {
-                break;
-            }
-            open.pop();
-        }
-        up.push(open.last().copied().unwrap_or(u32::MAX));
-        open.push(up.len() as u32 - 1);
-    }
-    up
 }
 
 /// Per candidate, the candidates of its block: the candidates of one
@@ -537,7 +588,7 @@ pub fn prune(ctx: &Context, pv: &ProblemViews, cands: &Candidates, sel: &mut Sel
         let mut ok = true;
         for &c in &users[i as usize] {
             let cpv = &pv.cpvs[c as usize];
-            let Some(orig) = cpv.node_cost(cands.list[i as usize].node) else {
+            let Some(orig) = cands.pair_cost_of(cands.list[i as usize].node, c) else {
                 ok = false;
                 break;
             };
@@ -568,7 +619,7 @@ mod tests {
     use crate::scene::hierarchy::Hierarchy;
     use crate::testutil::{synthetic_city, synthetic_job};
     use crate::views;
-    use crate::views::{Counters, MAX_PAIRS};
+    use crate::views::Counters;
 
     #[test]
     fn block_scores_equal_single_scores_bit_for_bit() {
@@ -576,7 +627,7 @@ mod tests {
         let job = synthetic_job(5, 5);
         let h = Hierarchy::build(&scene);
         let ctx = Context::new(&scene, &h, None, &job, Control::default());
-        let pv = views::approximate(&ctx, &job, &Counters::new(MAX_PAIRS));
+        let pv = views::approximate(&ctx, &job, &Counters::new());
         let cands = crate::candidates::generate(&ctx, &job, &pv);
         let mut st = State::new(&ctx, &pv, &cands);
         let blocks = blocks(&cands.list);

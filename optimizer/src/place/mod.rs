@@ -22,8 +22,9 @@ pub use assemble::{assemble, build_placement};
 pub struct PlaceOptions {
     /// Run the pruning pass after the greedy selection.
     pub prune: bool,
-    /// Budget of (CPV, cluster) pairs; `None` is [`views::MAX_PAIRS`].
-    pub max_pairs: Option<u64>,
+    /// The most memory a run may need, bytes, as predicted once the problem
+    /// views are known; `None`: the machine's memory ([`machine_memory_bytes`]).
+    pub max_memory_bytes: Option<u64>,
 }
 
 /// The result of [`Prepared::place`].
@@ -81,18 +82,23 @@ impl Prepared<'_> {
             "approximating the problem view space",
         );
         let ctx = Context::new(self.scene(), self.hierarchy(), self.visibility(), job, *ctl);
-        let counters = Counters::new(opts.max_pairs.unwrap_or(views::MAX_PAIRS));
+        let counters = Counters::new();
         let pv = views::approximate(&ctx, job, &counters);
         st.end("problem_views");
-        if counters.over_budget() {
+        ctl.check()?;
+        let predicted = predicted_peak_bytes(&pv, counters.pairs());
+        let limit = opts.max_memory_bytes.unwrap_or_else(machine_memory_bytes);
+        if predicted > limit || counters.pairs() >= u64::from(u32::MAX) {
             return Err(Error::bad(
                 self.job_name(),
                 format!(
-                    "the problem view space needs more than {} (problem view, cluster) pairs (about {} GB); \
-                     raise target_frame_time_ms, enlarge problem_views.cell_size or min_vdi_deg, or shrink \
-                     the view space",
-                    counters.pair_budget(),
-                    counters.pair_budget() * views::BYTES_PER_PAIR / 1_000_000_000
+                    "the job needs about {:.1} GB ({} problem views listing {} (problem view, cluster) pairs), \
+                     more than the {:.1} GB available; raise target_frame_time_ms, enlarge \
+                     problem_views.cell_size or min_vdi_deg, or shrink the view space",
+                    predicted as f64 / 1e9,
+                    pv.cpvs.len(),
+                    counters.pairs(),
+                    limit as f64 / 1e9
                 ),
             ));
         }
@@ -154,10 +160,12 @@ impl Prepared<'_> {
         st.end("placement");
 
         let stats = Stats {
-            candidate_pairs: cands.pairs.len() as u64,
+            candidate_pairs: cands.pair_cpv.len() as u64,
             candidates: cands.list.len() as u64,
             greedy_choices: sel.accepted,
             score_evaluations: sel.evaluations,
+            evaluations_per_choice: sel.evaluations as f64 / sel.accepted.max(1) as f64,
+            predicted_peak_bytes: predicted,
             pruned: sel.pruned,
             ..self.run_stats(&ctx, &counters, &pv, &placement, st.times)
         };
@@ -195,18 +203,44 @@ impl Prepared<'_> {
     }
 }
 
+/// Bytes a run holds per (CPV, cluster) pair from candidate generation on:
+/// the pair itself (CPV id and cost, 20 bytes), its share of the groups,
+/// the served lists and the candidates (measured on the generated city and
+/// rounded up).
+pub const BYTES_PER_PAIR: u64 = 40;
+
+/// The peak memory a placement of `pv`, whose CPVs list `pairs` (CPV,
+/// cluster) pairs, is predicted to need: what the process holds now, the
+/// pairs and what grows with them, and the per-CPV greedy state.
+pub fn predicted_peak_bytes(pv: &ProblemViews, pairs: u64) -> u64 {
+    current_rss_bytes() + pairs * BYTES_PER_PAIR + pv.cpvs.len() as u64 * 256
+}
+
+/// The machine's memory, bytes (`MemTotal`; `u64::MAX` when unknown).
+pub fn machine_memory_bytes() -> u64 {
+    meminfo_kb("/proc/meminfo", "MemTotal:").map_or(u64::MAX, |kb| kb * 1024)
+}
+
+/// Resident set size of this process now (VmRSS), bytes; 0 when unknown.
+pub fn current_rss_bytes() -> u64 {
+    meminfo_kb("/proc/self/status", "VmRSS:").map_or(0, |kb| kb * 1024)
+}
+
+/// The kB value of line `key` of a `/proc` file.
+fn meminfo_kb(path: &str, key: &str) -> Option<u64> {
+    std::fs::read_to_string(path)
+        .ok()?
+        .lines()
+        .find_map(|l| l.strip_prefix(key))?
+        .split_whitespace()
+        .next()?
+        .parse()
+        .ok()
+}
+
 /// Peak resident set size of this process (VmHWM), bytes; 0 when unknown.
 pub fn peak_rss_bytes() -> u64 {
-    std::fs::read_to_string("/proc/self/status")
-        .ok()
-        .and_then(|s| {
-            s.lines().find(|l| l.starts_with("VmHWM:")).and_then(|l| {
-                l.split_whitespace()
-                    .nth(1)
-                    .and_then(|v| v.parse::<u64>().ok())
-            })
-        })
-        .map_or(0, |kb| kb * 1024)
+    meminfo_kb("/proc/self/status", "VmHWM:").map_or(0, |kb| kb * 1024)
 }
 
 #[cfg(test)]
@@ -353,23 +387,22 @@ mod tests {
     }
 
     #[test]
-    fn jobs_beyond_the_pair_budget_are_refused() {
+    fn jobs_beyond_the_memory_limit_are_refused() {
         let scene = synthetic_city(1, 5, 5);
         let job = synthetic_job(5, 5);
+        let out = try_place(&scene, &job, &PlaceOptions::default(), &Control::default()).unwrap();
+        let predicted = out.stats.predicted_peak_bytes;
+        assert!(predicted > out.stats.candidate_pairs * BYTES_PER_PAIR);
         let opts = PlaceOptions {
-            max_pairs: Some(50),
+            max_memory_bytes: Some(predicted / 2),
             ..PlaceOptions::default()
         };
         let e = try_place(&scene, &job, &opts, &Control::default()).unwrap_err();
         assert!(e.is_bad_input(), "{e}");
         assert!(e.to_string().contains("target_frame_time_ms"), "{e}");
-        // Within the budget the same job places.
-        let pairs = try_place(&scene, &job, &PlaceOptions::default(), &Control::default())
-            .unwrap()
-            .stats
-            .candidate_pairs;
+        // With room for the prediction the same job places.
         let opts = PlaceOptions {
-            max_pairs: Some(pairs),
+            max_memory_bytes: Some(predicted * 2),
             ..PlaceOptions::default()
         };
         assert!(try_place(&scene, &job, &opts, &Control::default()).is_ok());
@@ -381,7 +414,7 @@ mod tests {
         let job = synthetic_job(5, 5);
         let h = Hierarchy::build(&scene);
         let ctx = Context::new(&scene, &h, None, &job, Control::default());
-        let pv = views::approximate(&ctx, &job, &Counters::new(views::MAX_PAIRS));
+        let pv = views::approximate(&ctx, &job, &Counters::new());
         assert!(!pv.cpvs.is_empty());
         let flag = AtomicBool::new(true);
         let cancel = Control {
@@ -390,7 +423,7 @@ mod tests {
         };
         let ctx = Context::new(&scene, &h, None, &job, cancel);
         assert!(candidates::generate(&ctx, &job, &pv).list.is_empty());
-        let counters = Counters::new(views::MAX_PAIRS);
+        let counters = Counters::new();
         assert!(views::approximate(&ctx, &job, &counters).cpvs.is_empty());
     }
 
@@ -440,13 +473,16 @@ mod tests {
         job.candidates.view_cells = crate::api::job::ViewCellKind::Both;
         let h = Hierarchy::build(&scene);
         let ctx = Context::new(&scene, &h, None, &job, Control::default());
-        let pv = views::approximate(&ctx, &job, &Counters::new(views::MAX_PAIRS));
+        let pv = views::approximate(&ctx, &job, &Counters::new());
         let cands = candidates::generate(&ctx, &job, &pv);
         let mut checked = 0;
         for (i, c) in cands.list.iter().enumerate() {
-            cands.for_each_served(i as u32, |cpv, idx| {
+            cands.for_each_served(i as u32, |cpv, p| {
+                assert_eq!(
+                    cands.pair_cost_of(c.node, cpv),
+                    Some(cands.pair_cost[p as usize])
+                );
                 let cpv = &pv.cpvs[cpv as usize];
-                assert_eq!(cpv.node_ids[idx as usize], c.node);
                 assert!(c.cell.contains_box(&cpv.region), "{c:?} {:?}", cpv.region);
                 checked += 1;
             });
@@ -480,7 +516,7 @@ mod tests {
             job.candidates.view_cells = crate::api::job::ViewCellKind::Both;
             let h = Hierarchy::build(&scene);
             let ctx = Context::new(&scene, &h, None, &job, Control::default());
-            let pv = views::approximate(&ctx, &job, &Counters::new(views::MAX_PAIRS));
+            let pv = views::approximate(&ctx, &job, &Counters::new());
             let cands = candidates::generate(&ctx, &job, &pv);
             assert!(!cands.list.is_empty());
             let lazy = greedy::select_lazy(&ctx, &pv, &cands, &mut |_| true);

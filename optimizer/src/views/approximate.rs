@@ -5,7 +5,7 @@ use crate::api::job::Job;
 use crate::math::geom::{Vdi, enclosing_cone};
 use crate::math::grid::Grid;
 use crate::views::context::{Context, Counters};
-use crate::views::costs::{RegionCosts, enclosed_cost};
+use crate::views::costs::{RegionCosts, cpv_clusters, enclosed_cost};
 use crate::views::{Cpv, KdNode, ProblemViews, leaf_level};
 
 /// Builds the kd tree over the grid (pre-order).
@@ -69,6 +69,8 @@ fn ancestors(leaves: &[Vdi]) -> Vec<Vdi> {
 
 struct RegionResult {
     cpvs: Vec<Cpv>,
+    /// Per cluster, how many of `cpvs` list it (empty when there are none).
+    node_pairs: Vec<u32>,
     cones: u64,
     regions: u64,
 }
@@ -82,9 +84,10 @@ fn process(
     leaf_level: u8,
 ) -> RegionResult {
     let node = &kd[id as usize];
-    if counters.over_budget() || ctx.cancelled() {
+    if ctx.cancelled() {
         return RegionResult {
             cpvs: Vec::new(),
+            node_pairs: Vec::new(),
             cones: 0,
             regions: 0,
         };
@@ -117,45 +120,39 @@ fn process(
     if problems.is_empty() {
         return RegionResult {
             cpvs: Vec::new(),
+            node_pairs: Vec::new(),
             cones,
             regions: 1,
         };
     }
     match node.children {
         None => {
+            // Each CPV keeps only how many clusters it lists; the lists are
+            // counted per cluster here and computed again, a cell at a
+            // time, by candidate generation.
+            let mut node_pairs = vec![0u32; ctx.hierarchy.nodes.len()];
             let cpvs = problems
                 .into_iter()
                 .map(|(vdi, _)| {
-                    let cone = enclosing_cone(&region, &vdi, ctx.half_diagonal);
-                    let mut nodes = Vec::new();
-                    let cost = enclosed_cost(ctx, &costs, &cone, &region, Some(&mut nodes));
-                    let t = ctx.model.frame_time(cost);
-                    let h = ctx.hierarchy;
-                    // Keep the clusters some impostor could accelerate: an
-                    // impostor has at least one layer.
-                    nodes.retain(|&(n, orig)| {
-                        let s = h.nodes[n as usize].sphere;
-                        let imp =
-                            ctx.model
-                                .impostor(1, s.radius, region.distance_to_point(s.center));
-                        ctx.model.frame_time(cost - orig + imp) < t
-                    });
-                    nodes.sort_unstable_by_key(|&(n, _)| n);
+                    let (cost, nodes) = cpv_clusters(ctx, &costs, &region, &vdi);
+                    for &(n, _) in &nodes {
+                        node_pairs[n as usize] += 1;
+                    }
                     Cpv {
                         kd: id,
                         region,
                         vdi,
                         cost,
-                        time: t,
-                        node_ids: nodes.iter().map(|&(n, _)| n).collect(),
-                        node_costs: nodes.iter().map(|&(_, c)| c).collect(),
+                        time: ctx.model.frame_time(cost),
+                        listed: nodes.len() as u32,
                     }
                 })
                 .collect::<Vec<Cpv>>();
-            let pairs: usize = cpvs.iter().map(|c| c.node_ids.len()).sum();
-            counters.add_pairs(pairs as u64);
+            let pairs: u64 = cpvs.iter().map(|c| u64::from(c.listed)).sum();
+            counters.add_pairs(pairs);
             RegionResult {
                 cpvs,
+                node_pairs,
                 cones,
                 regions: 1,
             }
@@ -168,8 +165,20 @@ fn process(
                 || process(ctx, counters, kd, r, &leaves, leaf_level),
             );
             a.cpvs.extend(b.cpvs);
+            let node_pairs = match (a.node_pairs.is_empty(), b.node_pairs.is_empty()) {
+                (_, true) => a.node_pairs,
+                (true, false) => b.node_pairs,
+                (false, false) => {
+                    let mut sum = a.node_pairs;
+                    for (x, y) in sum.iter_mut().zip(b.node_pairs) {
+                        *x += y;
+                    }
+                    sum
+                }
+            };
             RegionResult {
                 cpvs: a.cpvs,
+                node_pairs,
                 cones: cones + a.cones + b.cones,
                 regions: 1 + a.regions + b.regions,
             }
@@ -178,8 +187,8 @@ fn process(
 }
 
 /// Approximates the problem view space of `job`, counting its work in
-/// `counters`; stops early (with what it found so far) once the counters
-/// are over their pair budget or the run is cancelled.
+/// `counters`; stops early (with what it found so far) once the run is
+/// cancelled.
 pub fn approximate(ctx: &Context, job: &Job, counters: &Counters) -> ProblemViews {
     let grid = job.grid();
     let kd = build_kd(&grid);
@@ -202,6 +211,11 @@ pub fn approximate(ctx: &Context, job: &Job, counters: &Counters) -> ProblemView
         grid,
         kd,
         cpvs: res.cpvs,
+        node_pairs: if res.node_pairs.is_empty() {
+            vec![0; ctx.hierarchy.nodes.len()]
+        } else {
+            res.node_pairs
+        },
         leaf_level: level,
         cone_evaluations: res.cones,
         regions_visited: res.regions,

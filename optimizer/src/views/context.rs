@@ -1,8 +1,7 @@
 //! What the per-region work of the approximation, the candidate generation
 //! and the greedy share: the scene, its hierarchy and visibility, the cost
 //! model and the job's limits ([`Context`], read-only), and the work
-//! counters with the pair budget that stops a run too large for memory
-//! ([`Counters`]).
+//! counters ([`Counters`]).
 
 use std::sync::atomic::{AtomicU64, Ordering};
 
@@ -70,49 +69,38 @@ impl<'a> Context<'a> {
     }
 }
 
-/// The default budget of (CPV, cluster) pairs. Every pair costs about 50
-/// bytes through candidate generation and the greedy, so 300 M pairs need
-/// about 15 GB; a job beyond it is refused instead of exhausting memory.
-pub const MAX_PAIRS: u64 = 300_000_000;
-
-/// Bytes held per (CPV, cluster) pair from the approximation to the greedy.
-pub const BYTES_PER_PAIR: u64 = 49;
-
 /// Work counters of one run, safe to update from any thread.
 pub struct Counters {
     /// (CPV, cluster) pairs recorded so far.
     pairs: AtomicU64,
-    /// The most pairs the run may hold; the approximation stops early
-    /// once `pairs` exceeds it.
-    pair_budget: u64,
     /// Per level of detail, how often it was chosen for a (region, object)
     /// pair; the last slot counts objects too small to be drawn.
     lod_levels: Vec<AtomicU64>,
 }
 
+impl Default for Counters {
+    fn default() -> Self {
+        Counters::new()
+    }
+}
+
 impl Counters {
-    /// Zero counters with a budget of `pair_budget` (CPV, cluster) pairs.
-    pub fn new(pair_budget: u64) -> Self {
+    /// Zero counters.
+    pub fn new() -> Self {
         Counters {
             pairs: AtomicU64::new(0),
-            pair_budget,
             lod_levels: (0..=MAX_LODS).map(|_| AtomicU64::new(0)).collect(),
         }
     }
 
-    /// The pair budget.
-    pub fn pair_budget(&self) -> u64 {
-        self.pair_budget
+    /// (CPV, cluster) pairs recorded so far.
+    pub fn pairs(&self) -> u64 {
+        self.pairs.load(Ordering::Relaxed)
     }
 
     /// Records `n` more (CPV, cluster) pairs.
     pub fn add_pairs(&self, n: u64) {
         self.pairs.fetch_add(n, Ordering::Relaxed);
-    }
-
-    /// True once the recorded pairs exceed the budget.
-    pub fn over_budget(&self) -> bool {
-        self.pairs.load(Ordering::Relaxed) > self.pair_budget
     }
 
     /// Counts one choice of level `slot` ([`MAX_LODS`]: not drawn).

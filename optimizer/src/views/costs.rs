@@ -4,7 +4,7 @@
 
 use crate::math::geom::{Aabb, Cone, Vdi, enclosing_cone};
 use crate::model::cost::Cost;
-use crate::views::context::{Context, Counters, MAX_PAIRS};
+use crate::views::context::{Context, Counters};
 use crate::visibility::ObjectSet;
 
 /// Per-region costs: every object's cost seen from the region's closest point
@@ -128,10 +128,41 @@ pub fn enclosed_cost(
     visit(ctx, costs, cone, region, 0, &mut emit)
 }
 
+/// The cost of what the enclosing frustum of (`region`, `vdi`) sees, and
+/// the clusters a CPV there may replace, sorted by node id, each with the
+/// cost of its objects inside the frustum: they meet the frustum, do not
+/// meet the region, and a one-layer impostor of them would be cheaper than
+/// their objects there. The problem view approximation counts these lists;
+/// candidate generation computes them again, one cell at a time, instead of
+/// holding every CPV's list at once.
+pub fn cpv_clusters(
+    ctx: &Context,
+    costs: &RegionCosts,
+    region: &Aabb,
+    vdi: &Vdi,
+) -> (Cost, Vec<(u32, Cost)>) {
+    let cone = enclosing_cone(region, vdi, ctx.half_diagonal);
+    let mut nodes = Vec::new();
+    let cost = enclosed_cost(ctx, costs, &cone, region, Some(&mut nodes));
+    let t = ctx.model.frame_time(cost);
+    let h = ctx.hierarchy;
+    // Keep the clusters some impostor could accelerate: an impostor has at
+    // least one layer.
+    nodes.retain(|&(n, orig)| {
+        let s = h.nodes[n as usize].sphere;
+        let imp = ctx
+            .model
+            .impostor(1, s.radius, region.distance_to_point(s.center));
+        ctx.model.frame_time(cost - orig + imp) < t
+    });
+    nodes.sort_unstable_by_key(|&(n, _)| n);
+    (cost, nodes)
+}
+
 /// Estimated frame time of views in `region` with directions in `vdi`, using
 /// the enclosing frustum and every object (for tests and baselines).
 pub fn enclosing_time(ctx: &Context, region: &Aabb, vdi: &Vdi) -> f64 {
-    let costs = RegionCosts::new(ctx, region, None, &Counters::new(MAX_PAIRS));
+    let costs = RegionCosts::new(ctx, region, None, &Counters::new());
     let cone = enclosing_cone(region, vdi, ctx.half_diagonal);
     ctx.model
         .frame_time(enclosed_cost(ctx, &costs, &cone, region, None))

@@ -16,8 +16,8 @@ mod context;
 mod costs;
 
 pub use approximate::approximate;
-pub use context::{BYTES_PER_PAIR, Context, Counters, MAX_PAIRS};
-pub use costs::{RegionCosts, enclosed_cost, enclosing_time};
+pub use context::{Context, Counters};
+pub use costs::{RegionCosts, cpv_clusters, enclosed_cost, enclosing_time};
 
 use crate::math::geom::{Aabb, Vdi};
 use crate::math::grid::Grid;
@@ -52,26 +52,11 @@ pub struct Cpv {
     pub cost: Cost,
     /// Estimated frame time `t_enc`, ms.
     pub time: f64,
-    /// The clusters that may become impostors here, sorted by node id: they
-    /// meet the enclosing frustum, do not meet the region, and a one-layer
-    /// impostor of them would be cheaper than their objects in the frustum.
-    pub node_ids: Vec<u32>,
-    /// For each of `node_ids`, the cost of the cluster's objects inside the
-    /// enclosing frustum.
-    pub node_costs: Vec<Cost>,
-}
-
-impl Cpv {
-    /// Index of cluster `node` in `node_ids`, if it may be replaced here.
-    pub fn node_index(&self, node: u32) -> Option<usize> {
-        self.node_ids.binary_search(&node).ok()
-    }
-
-    /// Original cost of cluster `node`'s objects in this CPV, if it may be
-    /// replaced here.
-    pub fn node_cost(&self, node: u32) -> Option<Cost> {
-        self.node_index(node).map(|i| self.node_costs[i])
-    }
+    /// How many clusters may become impostors here: they meet the enclosing
+    /// frustum, do not meet the region, and a one-layer impostor of them
+    /// would be cheaper than their objects in the frustum
+    /// ([`cpv_clusters`] lists them).
+    pub listed: u32,
 }
 
 /// The result of the approximation.
@@ -83,6 +68,8 @@ pub struct ProblemViews {
     pub kd: Vec<KdNode>,
     /// The CPVs, in kd order (each kd node's CPVs are contiguous).
     pub cpvs: Vec<Cpv>,
+    /// Per cluster (node id): how many CPVs list it.
+    pub node_pairs: Vec<u32>,
     /// Quadtree level of minimum-size VDIs.
     pub leaf_level: u8,
     /// Enclosing frusta evaluated (a work counter for statistics).
@@ -184,7 +171,7 @@ mod tests {
         let job = crate::testutil::synthetic_job(6, 6);
         let h = Hierarchy::build(&scene);
         let ctx = Context::new(&scene, &h, None, &job, Control::default());
-        let pv = approximate(&ctx, &job, &Counters::new(MAX_PAIRS));
+        let pv = approximate(&ctx, &job, &Counters::new());
         assert!(
             !pv.cpvs.is_empty(),
             "the synthetic job must have problem views"
@@ -210,10 +197,6 @@ mod tests {
         };
         let h2 = Hierarchy::build(&tiny);
         let ctx2 = Context::new(&tiny, &h2, None, &job, Control::default());
-        assert!(
-            approximate(&ctx2, &job, &Counters::new(MAX_PAIRS))
-                .cpvs
-                .is_empty()
-        );
+        assert!(approximate(&ctx2, &job, &Counters::new()).cpvs.is_empty());
     }
 }
