@@ -37,6 +37,10 @@ pub struct GenCityArgs {
     /// (use with fixtures/jobs/failure.json).
     #[arg(long)]
     failure: bool,
+    /// Generate the long-track stress scene instead: a 4.2 km race track
+    /// lined by about 4,400 small objects (use with fixtures/jobs/track.json).
+    #[arg(long, conflicts_with = "failure")]
+    track: bool,
     /// Output file (default: standard output for --summary; required for GLB).
     #[arg(short, long)]
     out: Option<PathBuf>,
@@ -45,6 +49,8 @@ pub struct GenCityArgs {
 pub fn run(a: GenCityArgs) -> Result<ExitCode> {
     let glb = if a.failure {
         citygen::generate_failure(a.seed)?
+    } else if a.track {
+        citygen::generate_track(a.seed)?
     } else {
         citygen::generate(&citygen::CityParams {
             seed: a.seed,

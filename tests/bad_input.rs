@@ -227,3 +227,45 @@ fn impossible_view_cells_are_rejected() {
         assert!(stderr(&o).contains(needle), "case {k}: {}", stderr(&o));
     }
 }
+
+#[test]
+fn jobs_predicted_beyond_the_memory_limit_are_refused() {
+    let dir = tmp("memory-limit");
+    let scene = city("0.1");
+    let job = root().join("fixtures/jobs/city-small.json");
+    let out = dir.join("placement.json");
+    let o = place(&scene, &job, &out, &["--max-memory-gb", "0.001"]);
+    let err = stderr(&o);
+    assert_eq!(code(&o), 2, "{err}");
+    for needle in [
+        "city-small.json",
+        "GB",
+        "problem views",
+        "target_frame_time_ms",
+    ] {
+        assert!(
+            err.contains(needle),
+            "message does not name {needle:?}: {err}"
+        );
+    }
+    assert!(!out.exists(), "no placement for a refused job");
+    // With room for its prediction the same job places.
+    let stats = dir.join("stats.json");
+    let o = place(
+        &scene,
+        &job,
+        &out,
+        &["--max-memory-gb", "24", "--stats", s(&stats)],
+    );
+    assert_eq!(code(&o), 0, "{}", stderr(&o));
+    let predicted = read_json(&stats)["predicted_peak_bytes"].as_u64().unwrap();
+    assert!(
+        predicted > 1_000_000 && predicted < 24_000_000_000,
+        "{predicted}"
+    );
+    // Nonsense limits are argument errors.
+    for bad in ["0", "-1", "NaN", "lots"] {
+        let o = place(&scene, &job, &out, &["--max-memory-gb", bad]);
+        assert_eq!(code(&o), 2, "--max-memory-gb {bad}: {}", stderr(&o));
+    }
+}

@@ -41,15 +41,18 @@
 //! never culled, so levels change cost, never visibility.
 //!
 //! The prototype shapes are in `meshes`, the street prototypes' levels in
-//! `streets`, and the failure scene of the comparison reports
-//! ([`generate_failure`]) in `failure`.
+//! `streets`, the failure scene of the comparison reports
+//! ([`generate_failure`]) in `failure`, and the long-track stress scene
+//! ([`generate_track`]) in `track`.
 
 mod failure;
 mod meshes;
 mod streets;
 mod terrain;
+mod track;
 
 pub use failure::generate_failure;
+pub use track::{TRACK_LENGTH, generate_track, track_z};
 
 use std::collections::BTreeMap;
 use std::f32::consts::PI;

@@ -367,7 +367,7 @@ impl<'a> State<'a> {
                 if new {
                     adj.insert(rank, saving);
                 } else {
-                    adj[rank] = adj[rank] + saving;
+                    adj[rank] += saving;
                 }
                 up = h.nodes[up as usize].parent;
             }

@@ -71,8 +71,8 @@ impl<'c> Stages<'c> {
 impl Prepared<'_> {
     /// Places impostors for the prepared job, reporting progress and
     /// stopping on cancellation ([`Error::Cancelled`]) through `ctl`. Fails
-    /// with [`Error::BadInput`] naming the job when it needs more memory
-    /// than the pair budget allows.
+    /// with [`Error::BadInput`] naming the job when its predicted peak
+    /// memory exceeds `opts.max_memory_bytes` (default: the machine's).
     pub fn place(&self, opts: &PlaceOptions, ctl: &Control) -> Result<PlaceOutput> {
         let job = self.job();
         let mut st = Stages::new(ctl, self.seconds());
@@ -204,10 +204,11 @@ impl Prepared<'_> {
 }
 
 /// Bytes a run holds per (CPV, cluster) pair from candidate generation on:
-/// the pair itself (CPV id and cost, 20 bytes), its share of the groups,
-/// the served lists and the candidates (measured on the generated city and
-/// rounded up).
-pub const BYTES_PER_PAIR: u64 = 40;
+/// the pair itself (CPV id and cost, 20 bytes), its share of the groups
+/// (about 2 bytes), the served lists (4–5 bytes), the candidates and the
+/// greedy's heap (about 5 bytes), and the allocator's slack; measured on the
+/// generated city (46 bytes a pair at the peak) and rounded up.
+pub const BYTES_PER_PAIR: u64 = 50;
 
 /// The peak memory a placement of `pv`, whose CPVs list `pairs` (CPV,
 /// cluster) pairs, is predicted to need: what the process holds now, the
