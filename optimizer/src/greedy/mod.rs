@@ -97,8 +97,6 @@ struct State<'a> {
     /// objects' cost minus its adjustment (set on the whole ancestor chain
     /// of every impostor).
     marks: NodeMarks,
-    /// Per CPV, one bit: within `t_max` (it adds nothing to any score).
-    solved: Vec<u64>,
     /// Per kd node (cell): how many of its CPVs are still above `t_max`. A
     /// solved CPV adds nothing to any score, so cells without unsolved CPVs
     /// are skipped when scoring.
@@ -124,13 +122,18 @@ struct NodeMarks {
 }
 
 /// What [`NodeMarks`] says of a (CPV, cluster).
-#[derive(PartialEq)]
 enum Mark {
     /// Neither covered nor adjusted: represented by its objects.
     Plain,
     Covered,
     /// Adjusted, with the rank of its adjustment.
     Adjusted(usize),
+}
+
+/// Bytes of the greedy's marks for `cpvs` CPVs over a hierarchy of `nodes`
+/// nodes (part of the memory `place` predicts).
+pub fn marks_bytes(cpvs: usize, nodes: usize) -> u64 {
+    (cpvs * 3 * nodes.div_ceil(64) * 8) as u64
 }
 
 impl NodeMarks {
@@ -186,6 +189,9 @@ struct Effect {
     delta: f64,
     accelerates: bool,
     new_cost: Cost,
+    /// What the impostor saves against the cluster's current
+    /// representation.
+    saving: Cost,
 }
 
 impl<'a> State<'a> {
@@ -197,15 +203,6 @@ impl<'a> State<'a> {
             all: cands,
             adjustments: vec![Vec::new(); pv.cpvs.len()],
             marks: NodeMarks::new(pv.cpvs.len(), ctx.hierarchy.nodes.len()),
-            solved: {
-                let mut v = vec![0u64; pv.cpvs.len().div_ceil(64)];
-                for (i, c) in pv.cpvs.iter().enumerate() {
-                    if c.time <= ctx.t_max {
-                        v[i / 64] |= 1 << (i % 64);
-                    }
-                }
-                v
-            },
             unsolved_in_cell: {
                 let mut v = vec![0u32; pv.kd.len()];
                 for c in &pv.cpvs {
@@ -264,11 +261,12 @@ impl<'a> State<'a> {
             delta: (t_cur - t_new.max(self.ctx.t_max)).max(0.0),
             accelerates: t_new < t_cur,
             new_cost,
+            saving: rep - imp,
         })
     }
 
-    /// Calls `f(cpv, pair, effect)` for every CPV candidate `i` may serve.
-    fn for_each_effect(&self, i: u32, mut f: impl FnMut(u32, u32, Effect)) {
+    /// Calls `f(cpv, effect)` for every CPV candidate `i` may serve.
+    fn for_each_effect(&self, i: u32, mut f: impl FnMut(u32, Effect)) {
         let all = self.all;
         let cand = &self.cands[i as usize];
         let s = self.ctx.hierarchy.nodes[cand.node as usize].sphere;
@@ -279,7 +277,7 @@ impl<'a> State<'a> {
             for p in gr.pairs.indices() {
                 let c = all.pair_cpv[p];
                 if let Some(e) = self.effect(c, cand.node, p as u32, imp) {
-                    f(c, p as u32, e);
+                    f(c, e);
                 }
             }
         }
@@ -306,7 +304,7 @@ impl<'a> State<'a> {
             let imp = self.ctx.model.impostor(layers, s.radius, gr.dist);
             for p in gr.pairs.indices() {
                 let c = all.pair_cpv[p];
-                if self.solved[c as usize / 64] >> (c % 64) & 1 == 1 {
+                if self.ctx.model.frame_time(self.sel.cpv_cost[c as usize]) <= self.ctx.t_max {
                     continue;
                 }
                 if let Some(e) = self.effect(c, node, p as u32, imp) {
@@ -341,24 +339,20 @@ impl<'a> State<'a> {
     }
 
     fn accept(&mut self, i: u32) {
-        let mut changes: Vec<(u32, u32, Cost)> = Vec::new();
-        self.for_each_effect(i, |c, p, e| {
+        let mut changes: Vec<(u32, Cost, Cost)> = Vec::new();
+        self.for_each_effect(i, |c, e| {
             if e.accelerates {
-                changes.push((c, p, e.new_cost));
+                changes.push((c, e.new_cost, e.saving));
             }
         });
         let h = self.ctx.hierarchy;
         let node = self.cands[i as usize].node;
         let end = h.nodes[node as usize].subtree_end;
-        for (c, p, cost) in changes {
+        for (c, cost, saving) in changes {
             let cu = c as usize;
             let cpv = &self.pv.cpvs[cu];
             // The impostor replaces the cluster's representation: every
             // ancestor's gets cheaper by the difference.
-            let rep = self
-                .representation(c, node, self.all.pair_cost[p as usize])
-                .expect("an accelerated CPV does not cover the cluster");
-            let saving = rep - self.impostor_cost(i, cpv);
             self.marks.cover(c, node, end);
             let mut up = h.nodes[node as usize].parent;
             while up != u32::MAX {
@@ -388,7 +382,6 @@ impl<'a> State<'a> {
                 && m.frame_time(cost) <= self.ctx.t_max
             {
                 self.unsolved_in_cell[cpv.kd as usize] -= 1;
-                self.solved[cu / 64] |= 1 << (cu % 64);
             }
             self.sel.cpv_cost[cu] = cost;
             self.cell_changed[cpv.kd as usize] = self.sel.accepted + 1;

@@ -212,9 +212,14 @@ pub const BYTES_PER_PAIR: u64 = 50;
 
 /// The peak memory a placement of `pv`, whose CPVs list `pairs` (CPV,
 /// cluster) pairs, is predicted to need: what the process holds now, the
-/// pairs and what grows with them, and the per-CPV greedy state.
+/// pairs and what grows with them, the per-CPV greedy state (costs, lists
+/// and the CPV itself, about 256 bytes) and the greedy's marks per (CPV,
+/// hierarchy node).
 pub fn predicted_peak_bytes(pv: &ProblemViews, pairs: u64) -> u64 {
-    current_rss_bytes() + pairs * BYTES_PER_PAIR + pv.cpvs.len() as u64 * 256
+    current_rss_bytes()
+        + pairs * BYTES_PER_PAIR
+        + pv.cpvs.len() as u64 * 256
+        + greedy::marks_bytes(pv.cpvs.len(), pv.node_pairs.len())
 }
 
 /// The machine's memory, bytes (`MemTotal`; `u64::MAX` when unknown).
