@@ -25,6 +25,21 @@ pub struct Stats {
     pub enclosing_frusta: u64,
     /// CPVs.
     pub cpvs: u64,
+    /// Problem views of minimum size that refinement of their directions
+    /// (`problem_views.refine_levels`) proved within the target, so they are
+    /// not CPVs.
+    #[serde(default)]
+    pub cpvs_refined_away: u64,
+    /// Share of CPVs in which some sampled exact view (no impostor) exceeds
+    /// the target: 1 when every CPV is a real problem view, near 0 when the
+    /// estimate finds problems no view has (absent without CPVs). Measured
+    /// on `cpv_precision_sampled` CPVs spread over the list, 32 views each;
+    /// sampling may miss a CPV's slowest view, so it is a lower bound.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub cpv_precision: Option<f64>,
+    /// CPVs sampled for `cpv_precision`.
+    #[serde(default)]
+    pub cpv_precision_sampled: u64,
     /// (CPV, cluster) pairs examined by candidate generation.
     pub candidate_pairs: u64,
     /// Candidates.

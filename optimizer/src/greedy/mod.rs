@@ -257,8 +257,14 @@ impl<'a> State<'a> {
         let new_cost = cur - rep + imp;
         let m = &self.ctx.model;
         let (t_cur, t_new) = (m.frame_time(cur), m.frame_time(new_cost));
+        // The gain: the time saved, capped by the CPV's excess over the
+        // target. Where times add up, the time saved is computed from the
+        // saving itself, not as a difference of two frame times, so it
+        // does not drift by a rounding step when the CPV's cost changes:
+        // scores then never grow, which the lazy greedy relies on.
+        let saved = m.time_saved(rep - imp).unwrap_or(t_cur - t_new);
         Some(Effect {
-            delta: (t_cur - t_new.max(self.ctx.t_max)).max(0.0),
+            delta: saved.min(t_cur - self.ctx.t_max).max(0.0),
             accelerates: t_new < t_cur,
             new_cost,
             saving: rep - imp,

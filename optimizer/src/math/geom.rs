@@ -358,9 +358,9 @@ impl Cone {
         self
     }
 
-    /// Signed distance of `p` to the cone's surface (negative inside) and
-    /// whether the closest surface point lies on the mantle (not the apex).
-    fn signed_distance(&self, p: DVec3) -> f64 {
+    /// Signed distance of `p` to the cone's surface (negative inside),
+    /// ignoring the floor plane.
+    pub fn signed_distance(&self, p: DVec3) -> f64 {
         let v = p - self.apex;
         let par = v.dot(self.axis);
         let perp = (v - self.axis * par).length();
@@ -386,43 +386,6 @@ impl Cone {
         self.all
             || (self.signed_distance(c) <= -r && (c - self.apex).dot(self.axis) - r >= self.floor)
     }
-}
-
-/// The conservative enclosing frustum of (region, VDI): a cone around the
-/// VDI's centre direction with half-angle = the VDI's angular radius + the
-/// frustum's diagonal half-angle, its apex pushed back along the axis until
-/// the cone contains the region. It contains every view frustum with apex in
-/// `region` and direction in `vdi`. This is the only such routine: CPV times,
-/// candidate service and baselines all call it.
-pub fn enclosing_cone(region: &Aabb, vdi: &Vdi, half_diagonal: f64) -> Cone {
-    let (axis, rho) = vdi.center_and_radius();
-    // A small margin absorbs rounding in the containment tests.
-    let gamma = rho + half_diagonal + 1e-9;
-    if gamma >= FRAC_PI_2 - 1e-9 {
-        return Cone::new(region.center(), axis, FRAC_PI_2);
-    }
-    let q = region.center();
-    let tan = gamma.tan();
-    let mut push = 0.0f64;
-    for corner in region.corners() {
-        let y = corner - q;
-        let par = y.dot(axis);
-        let perp = (y - axis * par).length();
-        push = push.max(perp / tan - par);
-    }
-    // Pad by a relative epsilon so corners are strictly inside.
-    let push = push + 1e-9 * (1.0 + region.half_diagonal());
-    let apex = q - axis * push;
-    // Every frustum of the CPV lies in front of its eye (γ < 90°), so nothing
-    // behind the plane through the region's rearmost corner is seen: cut the
-    // apex off there.
-    let floor = region
-        .corners()
-        .iter()
-        .map(|&c| (c - apex).dot(axis))
-        .fold(f64::INFINITY, f64::min);
-    Cone::new(apex, axis, gamma)
-        .with_floor((floor - 1e-9 * (1.0 + region.half_diagonal())).max(0.0))
 }
 
 /// An exact view frustum: an infinite pyramid with apex at the eye.
@@ -472,6 +435,13 @@ impl ViewFrustum {
             normals,
             edges,
         }
+    }
+
+    /// The four side planes' unit normals in world coordinates, pointing
+    /// into the frustum (left, right, bottom, top).
+    pub fn side_normals(&self) -> [DVec3; 4] {
+        self.normals
+            .map(|n| self.right * n.x + self.up * n.y + self.fwd * n.z)
     }
 
     /// The eye position.

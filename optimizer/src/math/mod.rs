@@ -1,6 +1,8 @@
 //! Shared mathematics: boxes, spheres, cones, view frusta, view-direction
-//! intervals on cube faces, and the seeded random number generator.
+//! intervals on cube faces, the conservative enclosing set of a problem
+//! view, and the seeded random number generator.
 
+pub mod enclosing;
 pub mod geom;
 pub mod grid;
 pub mod rng;

@@ -19,7 +19,8 @@ use rayon::prelude::*;
 
 use crate::api::job::Job;
 use crate::api::placement::{PlacedImpostor, SphereJson, ViewCellJson};
-use crate::math::geom::{Aabb, Sphere, enclosing_cone, face_coords};
+use crate::math::enclosing::enclosing_cone;
+use crate::math::geom::{Aabb, Sphere, face_coords};
 use crate::model::cost::Cost;
 use crate::model::impostor::{ImpostorModel, ViewCell};
 use crate::views::{Context, Counters, ProblemViews, RegionCosts, enclosed_cost};
@@ -216,7 +217,7 @@ pub fn place(ctx: &Context, job: &Job, pv: &ProblemViews, counters: &Counters) -
                 }
             }
             let costs = RegionCosts::new(ctx, &cpv.region, Some(&drawn), counters);
-            let cone = enclosing_cone(&cpv.region, &cpv.vdi, ctx.half_diagonal);
+            let cone = enclosing_cone(&cpv.region, &cpv.vdi, &ctx.lens);
             let mut cost = enclosed_cost(ctx, &costs, &cone, &cpv.region, None);
             for &i in &ids {
                 let s = &impostors[i as usize].sphere;

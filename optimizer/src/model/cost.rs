@@ -97,6 +97,16 @@ impl CostModel {
         }
     }
 
+    /// The frame time saved by a cost change of `saving`, when times add up
+    /// (`sum` and `primitives`); `None` for `max`, where it depends on the
+    /// whole cost.
+    pub fn time_saved(&self, saving: Cost) -> Option<f64> {
+        match self.combine {
+            Combine::Sum | Combine::Primitives => Some(saving.cpu + saving.gpu),
+            Combine::Max => None,
+        }
+    }
+
     /// Projected pixels of a sphere of `radius` seen from `distance`.
     pub fn pixels(&self, radius: f64, distance: f64) -> f64 {
         projected_area_px(radius, distance, self.focal_px, self.screen_px)

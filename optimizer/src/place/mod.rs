@@ -182,6 +182,7 @@ impl Prepared<'_> {
         placement: &Placement,
         seconds: Vec<StageTime>,
     ) -> Stats {
+        let precision = crate::views::cpv_precision(ctx, pv);
         Stats {
             threads: rayon::current_num_threads(),
             objects: ctx.scene.objects.len() as u64,
@@ -191,6 +192,9 @@ impl Prepared<'_> {
             regions_visited: pv.regions_visited,
             enclosing_frusta: pv.cone_evaluations,
             cpvs: pv.cpvs.len() as u64,
+            cpvs_refined_away: pv.refined_away,
+            cpv_precision: precision.map(|p| p.0),
+            cpv_precision_sampled: precision.map_or(0, |p| p.1),
             impostors: placement.summary.impostors,
             memory_bytes: placement.summary.memory_bytes,
             unsolved_cpvs: placement.summary.unsolved_cpvs,

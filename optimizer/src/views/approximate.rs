@@ -2,10 +2,11 @@
 //! quadtrees per region, and the recursion that keeps problem views.
 
 use crate::api::job::Job;
-use crate::math::geom::{Vdi, enclosing_cone};
+use crate::math::enclosing::enclosing_cone;
+use crate::math::geom::{Aabb, Vdi};
 use crate::math::grid::Grid;
 use crate::views::context::{Context, Counters};
-use crate::views::costs::{RegionCosts, cpv_clusters, enclosed_cost};
+use crate::views::costs::{RegionCosts, cpv_clusters, exceeds_target};
 use crate::views::{Cpv, KdNode, ProblemViews, leaf_level};
 
 /// Builds the kd tree over the grid (pre-order).
@@ -73,6 +74,61 @@ struct RegionResult {
     node_pairs: Vec<u32>,
     cones: u64,
     regions: u64,
+    /// Problem views of minimum size proven by refinement.
+    refined: u64,
+}
+
+impl RegionResult {
+    fn empty(cones: u64, regions: u64, refined: u64) -> RegionResult {
+        RegionResult {
+            cpvs: Vec::new(),
+            node_pairs: Vec::new(),
+            cones,
+            regions,
+            refined,
+        }
+    }
+}
+
+/// True when every part of (`region`, `vdi`) `levels` levels down (the VDI
+/// split in four per level, parts outside the pitch range skipped) has an
+/// enclosing time within the target, so no view of (`region`, `vdi`)
+/// exceeds it. Stops at the first part that exceeds the target at the
+/// deepest level. Only the directions are refined: the region's costs
+/// (closest distances, levels of detail, visible set) are its cell's, and
+/// halving the region as well doubled the work for a small gain (most of
+/// the estimate's excess is the VDI's spread of directions).
+fn proven_by_refinement(
+    ctx: &Context,
+    costs: &RegionCosts,
+    region: &Aabb,
+    vdi: &Vdi,
+    levels: u8,
+    cones: &mut u64,
+) -> bool {
+    if levels == 0 {
+        return false;
+    }
+    for child in vdi.children() {
+        if !ctx.pitch_overlaps(&child) {
+            continue;
+        }
+        *cones += 1;
+        if exceeds_target(ctx, costs, &enclosing_cone(region, &child, &ctx.lens))
+            && !proven_by_refinement(ctx, costs, region, &child, levels - 1, cones)
+        {
+            return false;
+        }
+    }
+    true
+}
+
+/// The quadtree level of minimum-size VDIs and how many levels below it
+/// problem views are refined.
+#[derive(Clone, Copy)]
+struct Levels {
+    leaf: u8,
+    refine: u8,
 }
 
 fn process(
@@ -81,59 +137,55 @@ fn process(
     kd: &[KdNode],
     id: u32,
     parent_problems: &[Vdi],
-    leaf_level: u8,
+    levels: Levels,
 ) -> RegionResult {
     let node = &kd[id as usize];
     if ctx.cancelled() {
-        return RegionResult {
-            cpvs: Vec::new(),
-            node_pairs: Vec::new(),
-            cones: 0,
-            regions: 0,
-        };
+        return RegionResult::empty(0, 0, 0);
     }
     let region = node.aabb;
     let visible = ctx.visibility.and_then(|v| v.region(node.lo, node.hi));
     let costs = RegionCosts::new(ctx, &region, visible.as_deref(), counters);
     let open = ancestors(parent_problems);
-    let mut problems: Vec<(Vdi, f64)> = Vec::new();
+    let mut problems: Vec<Vdi> = Vec::new();
     let mut cones = 0u64;
     let mut stack: Vec<Vdi> = (0..6u8).rev().map(Vdi::face).collect();
     while let Some(vdi) = stack.pop() {
         if open.binary_search(&vdi).is_err() || !ctx.pitch_overlaps(&vdi) {
             continue;
         }
-        let cone = enclosing_cone(&region, &vdi, ctx.half_diagonal);
         cones += 1;
-        let t = ctx
-            .model
-            .frame_time(enclosed_cost(ctx, &costs, &cone, &region, None));
-        if t <= ctx.t_max {
+        if !exceeds_target(ctx, &costs, &enclosing_cone(&region, &vdi, &ctx.lens)) {
             continue;
         }
-        if vdi.level == leaf_level {
-            problems.push((vdi, t));
+        if vdi.level == levels.leaf {
+            problems.push(vdi);
         } else {
             stack.extend(vdi.children().into_iter().rev());
         }
     }
     if problems.is_empty() {
-        return RegionResult {
-            cpvs: Vec::new(),
-            node_pairs: Vec::new(),
-            cones,
-            regions: 1,
-        };
+        return RegionResult::empty(cones, 1, 0);
     }
     match node.children {
         None => {
+            // Problem views of minimum size that a finer subdivision proves
+            // are dropped.
+            let before = problems.len() as u64;
+            problems.retain(|vdi| {
+                !proven_by_refinement(ctx, &costs, &region, vdi, levels.refine, &mut cones)
+            });
+            let refined = before - problems.len() as u64;
+            if problems.is_empty() {
+                return RegionResult::empty(cones, 1, refined);
+            }
             // Each CPV keeps only how many clusters it lists; the lists are
             // counted per cluster here and computed again, a cell at a
             // time, by candidate generation.
             let mut node_pairs = vec![0u32; ctx.hierarchy.nodes.len()];
             let cpvs = problems
                 .into_iter()
-                .map(|(vdi, _)| {
+                .map(|vdi| {
                     let (cost, nodes) = cpv_clusters(ctx, &costs, &region, &vdi);
                     for &(n, _) in &nodes {
                         node_pairs[n as usize] += 1;
@@ -155,14 +207,14 @@ fn process(
                 node_pairs,
                 cones,
                 regions: 1,
+                refined,
             }
         }
         Some([l, r]) => {
             drop(costs);
-            let leaves: Vec<Vdi> = problems.into_iter().map(|(v, _)| v).collect();
             let (mut a, b) = rayon::join(
-                || process(ctx, counters, kd, l, &leaves, leaf_level),
-                || process(ctx, counters, kd, r, &leaves, leaf_level),
+                || process(ctx, counters, kd, l, &problems, levels),
+                || process(ctx, counters, kd, r, &problems, levels),
             );
             a.cpvs.extend(b.cpvs);
             let node_pairs = match (a.node_pairs.is_empty(), b.node_pairs.is_empty()) {
@@ -181,6 +233,7 @@ fn process(
                 node_pairs,
                 cones: cones + a.cones + b.cones,
                 regions: 1 + a.regions + b.regions,
+                refined: a.refined + b.refined,
             }
         }
     }
@@ -206,7 +259,11 @@ pub fn approximate(ctx: &Context, job: &Job, counters: &Counters) -> ProblemView
             })
         })
         .collect();
-    let res = process(ctx, counters, &kd, 0, &all, level);
+    let levels = Levels {
+        leaf: level,
+        refine: job.problem_views.refine_levels,
+    };
+    let res = process(ctx, counters, &kd, 0, &all, levels);
     ProblemViews {
         grid,
         kd,
@@ -219,5 +276,6 @@ pub fn approximate(ctx: &Context, job: &Job, counters: &Counters) -> ProblemView
         leaf_level: level,
         cone_evaluations: res.cones,
         regions_visited: res.regions,
+        refined_away: res.refined,
     }
 }

@@ -8,7 +8,8 @@ use std::sync::atomic::{AtomicU64, Ordering};
 use crate::api::job::Job;
 use crate::api::stats::{LodReport, LodStats};
 use crate::control::Control;
-use crate::math::geom::{Vdi, frustum_half_diagonal};
+use crate::math::enclosing::Lens;
+use crate::math::geom::Vdi;
 use crate::model::cost::CostModel;
 use crate::scene::hierarchy::Hierarchy;
 use crate::scene::{MAX_LODS, Scene};
@@ -27,8 +28,8 @@ pub struct Context<'a> {
     pub model: CostModel,
     /// `t_max`, ms.
     pub t_max: f64,
-    /// Frustum diagonal half-angle, radians.
-    pub half_diagonal: f64,
+    /// The camera's lens.
+    pub lens: Lens,
     /// Pitch range, radians.
     pub pitch: [f64; 2],
     /// Cancellation (checked per kd region and per cluster) and progress.
@@ -51,7 +52,10 @@ impl<'a> Context<'a> {
             visibility,
             model: CostModel::new(job),
             t_max: job.target_frame_time_ms,
-            half_diagonal: frustum_half_diagonal(job.camera.fov_deg, f64::from(w) / f64::from(h)),
+            lens: Lens {
+                fov_deg: job.camera.fov_deg,
+                aspect: f64::from(w) / f64::from(h),
+            },
             pitch: job.view_space.pitch_deg.map(f64::to_radians),
             control,
         }

@@ -2,7 +2,8 @@
 //! object and cluster costs ([`RegionCosts`]) and the one walk that sums
 //! them inside a cone ([`enclosed_cost`]).
 
-use crate::math::geom::{Aabb, Cone, Vdi, enclosing_cone};
+use crate::math::enclosing::{Enclosing, Overlap, enclosing_cone};
+use crate::math::geom::{Aabb, Vdi};
 use crate::model::cost::Cost;
 use crate::views::context::{Context, Counters};
 use crate::visibility::ObjectSet;
@@ -69,14 +70,14 @@ impl RegionCosts {
 pub fn enclosed_cost(
     ctx: &Context,
     costs: &RegionCosts,
-    cone: &Cone,
+    cone: &Enclosing,
     region: &Aabb,
     mut emit: Option<&mut Vec<(u32, Cost)>>,
 ) -> Cost {
     fn visit(
         ctx: &Context,
         costs: &RegionCosts,
-        cone: &Cone,
+        cone: &Enclosing,
         region: &Aabb,
         n: u32,
         emit: &mut Option<&mut Vec<(u32, Cost)>>,
@@ -84,14 +85,15 @@ pub fn enclosed_cost(
         let h = ctx.hierarchy;
         let node = &h.nodes[n as usize];
         let s = node.sphere;
-        if !cone.intersects_sphere(s.center, s.radius) {
+        let overlap = cone.classify(s.center, s.radius);
+        if overlap == Overlap::Outside {
             return Cost::default();
         }
         let replaceable = |m: u32| {
             let s = h.nodes[m as usize].sphere;
             !region.intersects_sphere(s.center, s.radius)
         };
-        if cone.contains_sphere(s.center, s.radius) {
+        if overlap == Overlap::Inside {
             if let Some(out) = emit.as_deref_mut() {
                 for m in n..node.subtree_end {
                     let c = costs.nodes[m as usize];
@@ -128,6 +130,42 @@ pub fn enclosed_cost(
     visit(ctx, costs, cone, region, 0, &mut emit)
 }
 
+/// True when the objects whose spheres meet `cone` cost more than the
+/// target frame time: the walk stops as soon as the sum so far exceeds it
+/// (the frame time grows with every cost added).
+pub fn exceeds_target(ctx: &Context, costs: &RegionCosts, cone: &Enclosing) -> bool {
+    let h = ctx.hierarchy;
+    let mut sum = Cost::default();
+    let mut stack = vec![0u32];
+    while let Some(n) = stack.pop() {
+        let node = &h.nodes[n as usize];
+        let s = node.sphere;
+        match cone.classify(s.center, s.radius) {
+            Overlap::Outside => continue,
+            Overlap::Inside => sum += costs.nodes[n as usize],
+            Overlap::Partial => match node.children {
+                None => {
+                    for &o in h.objects(n) {
+                        let os = &h.object_spheres[o as usize];
+                        if cone.intersects_sphere(os.center, os.radius) {
+                            sum += costs.objects[o as usize];
+                        }
+                    }
+                }
+                Some([l, r]) => {
+                    stack.push(r);
+                    stack.push(l);
+                    continue;
+                }
+            },
+        }
+        if ctx.model.frame_time(sum) > ctx.t_max {
+            return true;
+        }
+    }
+    false
+}
+
 /// The cost of what the enclosing frustum of (`region`, `vdi`) sees, and
 /// the clusters a CPV there may replace, sorted by node id, each with the
 /// cost of its objects inside the frustum: they meet the frustum, do not
@@ -141,7 +179,7 @@ pub fn cpv_clusters(
     region: &Aabb,
     vdi: &Vdi,
 ) -> (Cost, Vec<(u32, Cost)>) {
-    let cone = enclosing_cone(region, vdi, ctx.half_diagonal);
+    let cone = enclosing_cone(region, vdi, &ctx.lens);
     let mut nodes = Vec::new();
     let cost = enclosed_cost(ctx, costs, &cone, region, Some(&mut nodes));
     let t = ctx.model.frame_time(cost);
@@ -163,7 +201,7 @@ pub fn cpv_clusters(
 /// the enclosing frustum and every object (for tests and baselines).
 pub fn enclosing_time(ctx: &Context, region: &Aabb, vdi: &Vdi) -> f64 {
     let costs = RegionCosts::new(ctx, region, None, &Counters::new());
-    let cone = enclosing_cone(region, vdi, ctx.half_diagonal);
+    let cone = enclosing_cone(region, vdi, &ctx.lens);
     ctx.model
         .frame_time(enclosed_cost(ctx, &costs, &cone, region, None))
 }

@@ -14,10 +14,12 @@
 mod approximate;
 mod context;
 mod costs;
+mod precision;
 
 pub use approximate::approximate;
 pub use context::{Context, Counters};
-pub use costs::{RegionCosts, cpv_clusters, enclosed_cost, enclosing_time};
+pub use costs::{RegionCosts, cpv_clusters, enclosed_cost, enclosing_time, exceeds_target};
+pub use precision::{cpv_precision, exact_view_time, slowest_sampled_view};
 
 use crate::math::geom::{Aabb, Vdi};
 use crate::math::grid::Grid;
@@ -76,6 +78,9 @@ pub struct ProblemViews {
     pub cone_evaluations: u64,
     /// kd regions visited.
     pub regions_visited: u64,
+    /// Problem views of minimum size that refinement proved within the
+    /// target (not CPVs).
+    pub refined_away: u64,
 }
 
 /// Quadtree level whose VDIs span at most `min_vdi_deg` (a face spans 90°).
@@ -92,8 +97,8 @@ mod tests {
     use super::*;
     use crate::api::job::Job;
     use crate::control::Control;
+    use crate::math::enclosing::{Lens, enclosing_cone};
     use crate::math::geom::{ViewFrustum, face_direction};
-    use crate::math::geom::{enclosing_cone, frustum_half_diagonal};
     use crate::math::rng::Rng;
     use crate::scene::Object;
     use crate::scene::Scene;
@@ -122,14 +127,51 @@ mod tests {
                 iv: (rng.next_u64() % u64::from(n)) as u32,
             };
             let fov = [30.0, 45.0, 60.0, 90.0][case % 4];
-            let aspect = [1.0, 1.5, 0.75][case % 3];
-            let cone = enclosing_cone(&region, &vdi, frustum_half_diagonal(fov, aspect));
+            let aspect = [1.0, 1.5, 0.75, 16.0 / 9.0, 2.4][case % 5];
+            let cone = enclosing_cone(
+                &region,
+                &vdi,
+                &Lens {
+                    fov_deg: fov,
+                    aspect,
+                },
+            );
             let [u0, u1] = vdi.u_range();
             let [v0, v1] = vdi.v_range();
-            for _ in 0..20 {
-                let eye = rng.in_box(region.min, region.max);
-                let dir = face_direction(vdi.face, rng.range(u0, u1), rng.range(v0, v1));
+            for k in 0..28 {
+                // The first views take the region's and the VDI's corners,
+                // where the enclosing set is tightest.
+                let (eye, dir) = if k < 8 {
+                    let corner = region.corners()[k];
+                    let (u, v) = ([u0, u1][k % 2], [v0, v1][(k / 2) % 2]);
+                    (corner, face_direction(vdi.face, u, v))
+                } else {
+                    let eye = rng.in_box(region.min, region.max);
+                    (
+                        eye,
+                        face_direction(vdi.face, rng.range(u0, u1), rng.range(v0, v1)),
+                    )
+                };
                 let f = ViewFrustum::new(eye, dir, fov, aspect);
+                // Small spheres just inside the frustum's edges and sides.
+                let (right, up, fwd) = f.basis();
+                let tv = (fov.to_radians() * 0.5).tan() * (1.0 - 1e-6);
+                let th = tv * aspect;
+                for _ in 0..50 {
+                    let (a, b) = match rng.next_u64() % 3 {
+                        0 => (
+                            [-th, th][rng.next_u64() as usize % 2],
+                            [-tv, tv][rng.next_u64() as usize % 2],
+                        ),
+                        1 => ([-th, th][rng.next_u64() as usize % 2], rng.range(-tv, tv)),
+                        _ => (rng.range(-th, th), [-tv, tv][rng.next_u64() as usize % 2]),
+                    };
+                    let p = eye + (fwd + right * a + up * b) * rng.range(0.1, 200.0);
+                    assert!(
+                        cone.intersects_sphere(p, 1e-6),
+                        "case {case}: edge point {p} seen from {eye} dir {dir}"
+                    );
+                }
                 for _ in 0..50 {
                     let c = rng.in_box(DVec3::splat(-300.0), DVec3::splat(300.0));
                     let r = rng.range(0.0, 20.0);
@@ -198,5 +240,71 @@ mod tests {
         let h2 = Hierarchy::build(&tiny);
         let ctx2 = Context::new(&tiny, &h2, None, &job, Control::default());
         assert!(approximate(&ctx2, &job, &Counters::new()).cpvs.is_empty());
+    }
+
+    /// Refinement only drops problem views, and every one it drops is
+    /// within the target in sampled exact views; without refinement the
+    /// same job keeps problem views no sampled view confirms (so the test
+    /// could fail), and the precision counts them.
+    #[test]
+    fn refinement_drops_only_views_within_the_target() {
+        let scene = crate::testutil::synthetic_city(5, 6, 6);
+        let mut job = crate::testutil::synthetic_job(6, 6);
+        let h = Hierarchy::build(&scene);
+        job.problem_views.refine_levels = 0;
+        let ctx = Context::new(&scene, &h, None, &job, Control::default());
+        let coarse = approximate(&ctx, &job, &Counters::new());
+        job.problem_views.refine_levels = 3;
+        let fine = approximate(&ctx, &job, &Counters::new());
+        assert_eq!(coarse.refined_away, 0);
+        assert_eq!(
+            coarse.cpvs.len() as u64,
+            fine.cpvs.len() as u64 + fine.refined_away
+        );
+        assert!(fine.refined_away > 0, "refinement proved nothing");
+        let kept: std::collections::HashSet<(u32, Vdi)> =
+            fine.cpvs.iter().map(|c| (c.kd, c.vdi)).collect();
+        let mut dropped = 0;
+        for (i, c) in coarse.cpvs.iter().enumerate() {
+            if kept.contains(&(c.kd, c.vdi)) {
+                continue;
+            }
+            dropped += 1;
+            let worst = slowest_sampled_view(&ctx, &coarse, c, 64, i as u64);
+            assert!(
+                worst <= job.target_frame_time_ms,
+                "a dropped problem view has an exact view of {worst} ms"
+            );
+        }
+        assert_eq!(dropped, fine.refined_away);
+        let (p_coarse, _) = cpv_precision(&ctx, &coarse).unwrap();
+        let (p_fine, _) = cpv_precision(&ctx, &fine).unwrap();
+        assert!(
+            p_coarse < 1.0,
+            "every coarse CPV is real: nothing to refine"
+        );
+        assert!(p_fine >= p_coarse, "{p_fine} < {p_coarse}");
+    }
+
+    /// The precision is 0 when no view can exceed the target and 1 when
+    /// every view does.
+    #[test]
+    fn precision_counts_confirmed_problem_views() {
+        let scene = crate::testutil::synthetic_city(5, 6, 6);
+        let mut job = crate::testutil::synthetic_job(6, 6);
+        let h = Hierarchy::build(&scene);
+        // Every view takes at least frame_ms: a target below it makes
+        // every (region, direction) a real problem view.
+        job.target_frame_time_ms = job.cost_model.frame_ms * 0.5;
+        let ctx = Context::new(&scene, &h, None, &job, Control::default());
+        let all = approximate(&ctx, &job, &Counters::new());
+        assert_eq!(cpv_precision(&ctx, &all).unwrap().0, 1.0);
+        // The same problem views judged against a target no exact view
+        // reaches.
+        let mut loose = job.clone();
+        loose.target_frame_time_ms = 1e6;
+        let ctx2 = Context::new(&scene, &h, None, &loose, Control::default());
+        assert_eq!(cpv_precision(&ctx2, &all).unwrap().0, 0.0);
+        assert!(cpv_precision(&ctx2, &approximate(&ctx2, &loose, &Counters::new())).is_none());
     }
 }

@@ -327,6 +327,13 @@ pub struct ProblemViewParams {
     /// Minimum angular size of a view-direction interval, degrees. Default 11.25.
     #[serde(default = "default_min_vdi")]
     pub min_vdi_deg: f64,
+    /// How many levels below `min_vdi_deg` a problem view's directions are
+    /// refined before it is kept: each level splits its VDI in four. A
+    /// problem view all of whose parts meet the target is proven and
+    /// dropped; one that is kept keeps its own (coarse) estimate. 0 turns
+    /// refinement off. Default 3, at most 4.
+    #[serde(default = "default_refine_levels")]
+    pub refine_levels: u8,
 }
 
 /// Which view-cell shapes make candidates.
@@ -419,6 +426,9 @@ fn default_cell_size() -> f64 {
 fn default_min_vdi() -> f64 {
     11.25
 }
+fn default_refine_levels() -> u8 {
+    3
+}
 fn default_view_cells() -> ViewCellKind {
     ViewCellKind::Shafts
 }
@@ -504,6 +514,7 @@ impl Default for ProblemViewParams {
         ProblemViewParams {
             cell_size: default_cell_size(),
             min_vdi_deg: default_min_vdi(),
+            refine_levels: default_refine_levels(),
         }
     }
 }
@@ -642,6 +653,7 @@ mod tests {
         assert_eq!(j.camera.resolution, [512, 512]);
         assert_eq!(j.problem_views.cell_size, 23.0);
         assert_eq!(j.problem_views.min_vdi_deg, 11.25);
+        assert_eq!(j.problem_views.refine_levels, 3);
         assert_eq!(j.candidates.apex_angles_deg, vec![11.25, 22.5, 45.0, 90.0]);
         assert_eq!(j.candidates.min_distance_doublings, 10);
         // The one departure: four minimum distances per doubling (the paper: 1).
@@ -686,6 +698,10 @@ mod tests {
             (
                 r#"{"view_space":{"min":[0,0,0],"max":[1e6,1,1e6]},"problem_views":{"cell_size":1}}"#,
                 "cell_size",
+            ),
+            (
+                r#"{"view_space":{"min":[0,0,0],"max":[1,1,1]},"problem_views":{"refine_levels":5}}"#,
+                "problem_views.refine_levels",
             ),
             (r#"{"camera":{}}"#, "view_space"),
         ];

@@ -4,6 +4,9 @@
 use crate::api::job::{Combine, Job, MAX_CELLS, ViewCellKind, VisibilityMode};
 use crate::error::{Error, Result};
 
+/// Deepest refinement of a problem view below the minimum sizes.
+const MAX_REFINE_LEVELS: u8 = 4;
+
 impl Job {
     /// Parses and validates a job; `source` names the file in errors.
     pub fn from_json(bytes: &[u8], source: &str) -> Result<Job> {
@@ -124,6 +127,12 @@ impl Job {
             return Err(bad(
                 "problem_views.min_vdi_deg",
                 format!("{} must be in [0.5, 90]", pv.min_vdi_deg),
+            ));
+        }
+        if pv.refine_levels > MAX_REFINE_LEVELS {
+            return Err(bad(
+                "problem_views.refine_levels",
+                format!("{} must be at most {MAX_REFINE_LEVELS}", pv.refine_levels),
             ));
         }
         let cp = &self.candidates;
