@@ -78,45 +78,92 @@ pub enum Overlap {
     Inside,
 }
 
+/// Bit of the floor plane in a [`Bounds`] mask (the side planes are bits
+/// `0..SIDE_PLANES`).
+const FLOOR_BIT: u32 = SIDE_PLANES as u32;
+/// Bit of the cone's mantle.
+const CONE_BIT: u32 = FLOOR_BIT + 1;
+/// First bit of the excluded cones.
+const EXCLUDED_BIT: u32 = CONE_BIT + 1;
+
+/// The bounds of an [`Enclosing`] set a sphere still has to be tested
+/// against: a sphere inside a parent sphere that lies inside some bound
+/// lies inside it too, so a hierarchy walk passes the parent's mask down.
+pub type Bounds = u32;
+
 impl Enclosing {
-    /// Where the sphere `(c, r)` lies, in one pass over the set's bounds
-    /// (the cheap planes first).
-    pub fn classify(&self, c: DVec3, r: f64) -> Overlap {
+    /// Every bound of the set (start of a walk).
+    pub fn all_bounds(&self) -> Bounds {
+        let n = if self.excluded.is_some() {
+            EXCLUDED_BIT + 4
+        } else {
+            EXCLUDED_BIT
+        };
+        (1u32 << n) - 1
+    }
+
+    /// Where the sphere `(c, r)` lies, testing only the bounds of `mask`
+    /// (those a containing sphere did not lie inside), the cheap planes
+    /// first; also the bounds the sphere does not lie inside.
+    pub fn classify_within(&self, c: DVec3, r: f64, mask: Bounds) -> (Overlap, Bounds) {
         if self.cone.all {
-            return Overlap::Inside;
+            return (Overlap::Inside, 0);
         }
-        let mut inside = true;
-        for &(n, h) in &self.planes {
+        let mut left = mask;
+        for (k, &(n, h)) in self.planes.iter().enumerate() {
+            if mask & (1 << k) == 0 {
+                continue;
+            }
             let d = n.dot(c) - h;
             if d > r {
-                return Overlap::Outside;
+                return (Overlap::Outside, 0);
             }
-            inside &= d <= -r;
+            if d <= -r {
+                left &= !(1 << k);
+            }
         }
-        let f = (c - self.cone.apex).dot(self.cone.axis) - self.cone.floor;
-        if f + r < 0.0 {
-            return Overlap::Outside;
+        if mask & (1 << FLOOR_BIT) != 0 {
+            let f = (c - self.cone.apex).dot(self.cone.axis) - self.cone.floor;
+            if f + r < 0.0 {
+                return (Overlap::Outside, 0);
+            }
+            if f - r >= 0.0 {
+                left &= !(1 << FLOOR_BIT);
+            }
         }
-        inside &= f - r >= 0.0;
-        let s = self.cone.signed_distance(c);
-        if s > r {
-            return Overlap::Outside;
+        if mask & (1 << CONE_BIT) != 0 {
+            let s = self.cone.signed_distance(c);
+            if s > r {
+                return (Overlap::Outside, 0);
+            }
+            if s <= -r {
+                left &= !(1 << CONE_BIT);
+            }
         }
-        inside &= s <= -r;
         if let Some(excluded) = &self.excluded {
-            for e in excluded {
+            for (k, e) in (EXCLUDED_BIT..).zip(excluded) {
+                if mask & (1 << k) == 0 {
+                    continue;
+                }
                 let s = e.signed_distance(c);
                 if s <= -r {
-                    return Overlap::Outside;
+                    return (Overlap::Outside, 0);
                 }
-                inside &= s >= r;
+                if s >= r {
+                    left &= !(1 << k);
+                }
             }
         }
-        if inside {
-            Overlap::Inside
+        if left == 0 {
+            (Overlap::Inside, 0)
         } else {
-            Overlap::Partial
+            (Overlap::Partial, left)
         }
+    }
+
+    /// Where the sphere `(c, r)` lies, in one pass over the set's bounds.
+    pub fn classify(&self, c: DVec3, r: f64) -> Overlap {
+        self.classify_within(c, r, self.all_bounds()).0
     }
 
     /// True when the sphere `(c, r)` may meet the set (conservative).

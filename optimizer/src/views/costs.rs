@@ -2,7 +2,7 @@
 //! object and cluster costs ([`RegionCosts`]) and the one walk that sums
 //! them inside a cone ([`enclosed_cost`]).
 
-use crate::math::enclosing::{Enclosing, Overlap, enclosing_cone};
+use crate::math::enclosing::{Bounds, Enclosing, Overlap, enclosing_cone};
 use crate::math::geom::{Aabb, Vdi};
 use crate::model::cost::Cost;
 use crate::views::context::{Context, Counters};
@@ -79,13 +79,13 @@ pub fn enclosed_cost(
         costs: &RegionCosts,
         cone: &Enclosing,
         region: &Aabb,
-        n: u32,
+        (n, mask): (u32, Bounds),
         emit: &mut Option<&mut Vec<(u32, Cost)>>,
     ) -> Cost {
         let h = ctx.hierarchy;
         let node = &h.nodes[n as usize];
         let s = node.sphere;
-        let overlap = cone.classify(s.center, s.radius);
+        let (overlap, left) = cone.classify_within(s.center, s.radius, mask);
         if overlap == Overlap::Outside {
             return Cost::default();
         }
@@ -109,14 +109,15 @@ pub fn enclosed_cost(
                 let mut c = Cost::default();
                 for &o in h.objects(n) {
                     let os = &h.object_spheres[o as usize];
-                    if cone.intersects_sphere(os.center, os.radius) {
+                    if cone.classify_within(os.center, os.radius, left).0 != Overlap::Outside {
                         c += costs.objects[o as usize];
                     }
                 }
                 c
             }
             Some([l, r]) => {
-                visit(ctx, costs, cone, region, l, emit) + visit(ctx, costs, cone, region, r, emit)
+                visit(ctx, costs, cone, region, (l, left), emit)
+                    + visit(ctx, costs, cone, region, (r, left), emit)
             }
         };
         if let Some(out) = emit.as_deref_mut()
@@ -127,7 +128,7 @@ pub fn enclosed_cost(
         }
         c
     }
-    visit(ctx, costs, cone, region, 0, &mut emit)
+    visit(ctx, costs, cone, region, (0, cone.all_bounds()), &mut emit)
 }
 
 /// True when the objects whose spheres meet `cone` cost more than the
@@ -136,25 +137,25 @@ pub fn enclosed_cost(
 pub fn exceeds_target(ctx: &Context, costs: &RegionCosts, cone: &Enclosing) -> bool {
     let h = ctx.hierarchy;
     let mut sum = Cost::default();
-    let mut stack = vec![0u32];
-    while let Some(n) = stack.pop() {
+    let mut stack = vec![(0u32, cone.all_bounds())];
+    while let Some((n, mask)) = stack.pop() {
         let node = &h.nodes[n as usize];
         let s = node.sphere;
-        match cone.classify(s.center, s.radius) {
-            Overlap::Outside => continue,
-            Overlap::Inside => sum += costs.nodes[n as usize],
-            Overlap::Partial => match node.children {
+        match cone.classify_within(s.center, s.radius, mask) {
+            (Overlap::Outside, _) => continue,
+            (Overlap::Inside, _) => sum += costs.nodes[n as usize],
+            (Overlap::Partial, left) => match node.children {
                 None => {
                     for &o in h.objects(n) {
                         let os = &h.object_spheres[o as usize];
-                        if cone.intersects_sphere(os.center, os.radius) {
+                        if cone.classify_within(os.center, os.radius, left).0 != Overlap::Outside {
                             sum += costs.objects[o as usize];
                         }
                     }
                 }
                 Some([l, r]) => {
-                    stack.push(r);
-                    stack.push(l);
+                    stack.push((r, left));
+                    stack.push((l, left));
                     continue;
                 }
             },
