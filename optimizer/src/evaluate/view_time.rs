@@ -4,7 +4,7 @@ use crate::evaluate::EvalOptions;
 use crate::evaluate::index::PlacementIndex;
 use crate::math::geom::ViewFrustum;
 use crate::math::rng::Rng;
-use crate::model::cost::{Cost, CostModel};
+use crate::model::cost::CostModel;
 use crate::render::raycast::RayCaster;
 use crate::scene::Scene;
 use crate::scene::geometry::SceneGeometry;
@@ -27,26 +27,16 @@ pub(super) fn view_time(
     mut culled: Option<&mut Vec<(f64, u32)>>,
 ) -> f64 {
     let eye = f.eye();
-    let mut cost = Cost::default();
-    h.walk(|n, node| {
-        if !f.intersects_sphere(node.sphere.center, node.sphere.radius) {
+    let mut cost = model.view_cost(scene, h, f, |o| {
+        if replaced.binary_search(&o).is_ok() {
             return false;
         }
-        if node.children.is_none() {
-            for &o in h.objects(n) {
+        if visible.is_some_and(|v| !v.contains(o)) {
+            if let Some(c) = culled.as_deref_mut() {
                 let s = &h.object_spheres[o as usize];
-                if replaced.binary_search(&o).is_ok() || !f.intersects_sphere(s.center, s.radius) {
-                    continue;
-                }
-                if visible.is_some_and(|v| !v.contains(o)) {
-                    if let Some(c) = culled.as_deref_mut() {
-                        c.push((eye.distance(s.center) - s.radius, o));
-                    }
-                    continue;
-                }
-                let ob = &scene.objects[o as usize];
-                cost += model.object_view(ob, s.radius, eye.distance(s.center));
+                c.push((eye.distance(s.center) - s.radius, o));
             }
+            return false;
         }
         true
     });

@@ -170,11 +170,6 @@ impl Enclosing {
     pub fn intersects_sphere(&self, c: DVec3, r: f64) -> bool {
         self.classify(c, r) != Overlap::Outside
     }
-
-    /// True when the sphere `(c, r)` lies entirely inside the set.
-    pub fn contains_sphere(&self, c: DVec3, r: f64) -> bool {
-        self.classify(c, r) == Overlap::Inside
-    }
 }
 
 /// The direction of the middle yaw and pitch of `vdi` and the largest angle

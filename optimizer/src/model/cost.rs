@@ -14,8 +14,9 @@
 //! uses the object's bounding sphere, whatever the level.
 
 use crate::api::job::{Combine, Job};
-use crate::math::geom::projected_area_px;
-use crate::scene::Object;
+use crate::math::geom::{ViewFrustum, projected_area_px};
+use crate::scene::hierarchy::Hierarchy;
+use crate::scene::{Object, Scene};
 
 /// A cost in milliseconds, split into CPU and GPU parts.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
@@ -95,6 +96,36 @@ impl CostModel {
             Combine::Sum | Combine::Primitives => self.frame_ms + c.cpu + c.gpu,
             Combine::Max => self.frame_ms + c.cpu.max(c.gpu),
         }
+    }
+
+    /// The cost of the objects whose bounding spheres meet the exact view
+    /// frustum `f` and that `draw` accepts (called once per such object, in
+    /// hierarchy order), each at its distance from the eye.
+    pub fn view_cost(
+        &self,
+        scene: &Scene,
+        h: &Hierarchy,
+        f: &ViewFrustum,
+        mut draw: impl FnMut(u32) -> bool,
+    ) -> Cost {
+        let eye = f.eye();
+        let mut cost = Cost::default();
+        h.walk(|n, node| {
+            if !f.intersects_sphere(node.sphere.center, node.sphere.radius) {
+                return false;
+            }
+            if node.children.is_none() {
+                for &o in h.objects(n) {
+                    let s = &h.object_spheres[o as usize];
+                    if f.intersects_sphere(s.center, s.radius) && draw(o) {
+                        let ob = &scene.objects[o as usize];
+                        cost += self.object_view(ob, s.radius, eye.distance(s.center));
+                    }
+                }
+            }
+            true
+        });
+        cost
     }
 
     /// The frame time saved by a cost change of `saving`, when times add up

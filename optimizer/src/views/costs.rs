@@ -64,6 +64,20 @@ impl RegionCosts {
     }
 }
 
+/// Cost of the objects of leaf `n` whose spheres meet `cone`, testing the
+/// bounds of `mask` (those the leaf's sphere was not inside).
+fn leaf_cost(ctx: &Context, costs: &RegionCosts, cone: &Enclosing, n: u32, mask: Bounds) -> Cost {
+    let h = ctx.hierarchy;
+    let mut c = Cost::default();
+    for &o in h.objects(n) {
+        let s = &h.object_spheres[o as usize];
+        if cone.classify_within(s.center, s.radius, mask).0 != Overlap::Outside {
+            c += costs.objects[o as usize];
+        }
+    }
+    c
+}
+
 /// Cost of all objects whose bounding sphere meets `cone`. When `emit` is
 /// given, also lists every cluster meeting the cone whose sphere does not meet
 /// `region`, with the cost of its objects inside the cone.
@@ -105,16 +119,7 @@ pub fn enclosed_cost(
             return costs.nodes[n as usize];
         }
         let c = match node.children {
-            None => {
-                let mut c = Cost::default();
-                for &o in h.objects(n) {
-                    let os = &h.object_spheres[o as usize];
-                    if cone.classify_within(os.center, os.radius, left).0 != Overlap::Outside {
-                        c += costs.objects[o as usize];
-                    }
-                }
-                c
-            }
+            None => leaf_cost(ctx, costs, cone, n, left),
             Some([l, r]) => {
                 visit(ctx, costs, cone, region, (l, left), emit)
                     + visit(ctx, costs, cone, region, (r, left), emit)
@@ -145,14 +150,7 @@ pub fn exceeds_target(ctx: &Context, costs: &RegionCosts, cone: &Enclosing) -> b
             (Overlap::Outside, _) => continue,
             (Overlap::Inside, _) => sum += costs.nodes[n as usize],
             (Overlap::Partial, left) => match node.children {
-                None => {
-                    for &o in h.objects(n) {
-                        let os = &h.object_spheres[o as usize];
-                        if cone.classify_within(os.center, os.radius, left).0 != Overlap::Outside {
-                            sum += costs.objects[o as usize];
-                        }
-                    }
-                }
+                None => sum += leaf_cost(ctx, costs, cone, n, left),
                 Some([l, r]) => {
                     stack.push((r, left));
                     stack.push((l, left));

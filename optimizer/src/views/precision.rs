@@ -7,7 +7,6 @@ use rayon::prelude::*;
 
 use crate::math::geom::{ViewFrustum, face_direction};
 use crate::math::rng::Rng;
-use crate::model::cost::Cost;
 use crate::views::{Context, Cpv, ProblemViews};
 use crate::visibility::ObjectSet;
 
@@ -20,25 +19,8 @@ pub const PRECISION_VIEWS: usize = 32;
 /// the objects of `visible` (all when `None`), without impostors.
 pub fn exact_view_time(ctx: &Context, visible: Option<&ObjectSet>, eye: DVec3, dir: DVec3) -> f64 {
     let f = ViewFrustum::new(eye, dir, ctx.lens.fov_deg, ctx.lens.aspect);
-    let h = ctx.hierarchy;
-    let mut cost = Cost::default();
-    h.walk(|n, node| {
-        if !f.intersects_sphere(node.sphere.center, node.sphere.radius) {
-            return false;
-        }
-        if node.children.is_none() {
-            for &o in h.objects(n) {
-                let s = &h.object_spheres[o as usize];
-                if visible.is_none_or(|v| v.contains(o)) && f.intersects_sphere(s.center, s.radius)
-                {
-                    let d = eye.distance(s.center);
-                    cost += ctx
-                        .model
-                        .object_view(&ctx.scene.objects[o as usize], s.radius, d);
-                }
-            }
-        }
-        true
+    let cost = ctx.model.view_cost(ctx.scene, ctx.hierarchy, &f, |o| {
+        visible.is_none_or(|v| v.contains(o))
     });
     ctx.model.frame_time(cost)
 }
