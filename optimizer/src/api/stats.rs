@@ -42,6 +42,17 @@ pub struct Stats {
     pub cpv_precision_sampled: u64,
     /// (CPV, cluster) pairs examined by candidate generation.
     pub candidate_pairs: u64,
+    /// Of those, the pairs that store their own cost (their cluster is
+    /// partly outside the CPV's enclosing set); the others take the
+    /// cluster's whole cost in the cell, held once per group.
+    #[serde(default)]
+    pub stored_pair_costs: u64,
+    /// Groups: one cluster's pairs in one cell.
+    #[serde(default)]
+    pub pair_groups: u64,
+    /// Entries of the candidates' served lists (group ids).
+    #[serde(default)]
+    pub served_entries: u64,
     /// Candidates.
     pub candidates: u64,
     /// Greedy choices.

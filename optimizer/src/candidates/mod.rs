@@ -34,7 +34,10 @@ use crate::math::IdRange;
 use crate::math::geom::Aabb;
 use crate::model::cost::Cost;
 use crate::model::impostor::{ImpostorModel, ImpostorSpec, ViewCell};
-use crate::views::{Context, Counters, ProblemViews, RegionCosts, cpv_clusters};
+use crate::views::{Context, ProblemViews};
+
+mod pairs;
+pub use pairs::{Group, Pairs};
 
 /// One impostor candidate.
 #[derive(Clone, Debug)]
@@ -52,128 +55,30 @@ pub struct Candidate {
 }
 
 /// The generated candidates, ordered by (node, key): ids are indices, and
-/// the serving relation at cell granularity.
-///
-/// A *pair* is a cluster listed by a CPV (see [`crate::views::cpv_clusters`]);
-/// pairs are stored grouped by cluster, CPV ids ascending within a cluster,
-/// as two flat arrays (the CPV and the cost of the cluster's objects in its
-/// enclosing frustum). A *group* is one cell's CPVs that list one cluster: a
-/// range of pairs. A candidate serves a list of groups (`served`), all of
-/// its own cluster.
+/// the serving relation at cell granularity: a candidate serves a list of
+/// groups (`served`), all of its own cluster (see [`Pairs`]).
 #[derive(Clone, Debug, Default)]
 pub struct Candidates {
     /// The candidates.
     pub list: Vec<Candidate>,
-    /// Per pair: the CPV id.
-    pub pair_cpv: Vec<u32>,
-    /// Per pair: the cost of the cluster's objects in the CPV's enclosing
-    /// frustum.
-    pub pair_cost: Vec<Cost>,
-    /// Per cluster (node id): its pairs are `node_pairs[n]..node_pairs[n + 1]`.
-    pub node_pairs: Vec<u32>,
-    /// Groups: ranges of pairs, each with its cell and distance.
-    pub groups: Vec<Group>,
+    /// The (cluster, CPV) pairs, by cluster and cell.
+    pub pairs: Pairs,
     /// Group ids served by the candidates (see `Candidate::served`).
     pub served: Vec<u32>,
 }
 
-/// One cell's CPVs that list one cluster.
-#[derive(Clone, Copy, Debug)]
-pub struct Group {
-    /// Its pairs: `pairs.start..pairs.end` of `Candidates::pair_cpv`.
-    pub pairs: IdRange,
-    /// The cell (kd leaf) of the CPVs.
-    pub kd: u32,
-    /// Distance from the cell's region to the cluster's sphere centre; all
-    /// CPVs of the group share it, hence an impostor's cost there.
-    pub dist: f64,
-}
-
 impl Candidates {
-    /// Calls `f(cpv id, pair index)` for every CPV candidate `i` may serve
-    /// (its region lies in the view cell, it lists the cluster, and the
-    /// impostor may accelerate its cell).
-    pub fn for_each_served(&self, i: u32, mut f: impl FnMut(u32, u32)) {
+    /// Calls `f(cpv id, cost)` for every CPV candidate `i` may serve (its
+    /// region lies in the view cell, it lists the cluster, and the impostor
+    /// may accelerate its cell), with the cost of the cluster's objects in
+    /// the CPV's enclosing set.
+    pub fn for_each_served(&self, i: u32, mut f: impl FnMut(u32, Cost)) {
         for &g in &self.served[self.list[i as usize].served.indices()] {
-            for p in self.groups[g as usize].pairs.indices() {
-                f(self.pair_cpv[p], p as u32);
+            for (c, cost) in self.pairs.iter(self.pairs.group(g)) {
+                f(c, cost);
             }
         }
     }
-
-    /// The cost of cluster `node`'s objects in CPV `cpv`'s enclosing
-    /// frustum, if the CPV lists it.
-    pub fn pair_cost_of(&self, node: u32, cpv: u32) -> Option<Cost> {
-        let (a, b) = (
-            self.node_pairs[node as usize] as usize,
-            self.node_pairs[node as usize + 1] as usize,
-        );
-        let k = self.pair_cpv[a..b].binary_search(&cpv).ok()?;
-        Some(self.pair_cost[a + k])
-    }
-}
-
-/// The (cluster, CPV) pairs of `pv`, grouped by cluster with CPV ids
-/// ascending: `(node_pairs, pair_cpv, pair_cost)` as in [`Candidates`]. The
-/// CPVs' cluster lists are computed again a few cells at a time (in
-/// parallel) and scattered into place, so no more than those few cells'
-/// lists are held besides the pairs.
-fn collect_pairs(ctx: &Context, pv: &ProblemViews) -> (Vec<u32>, Vec<u32>, Vec<Cost>) {
-    let n_nodes = ctx.hierarchy.nodes.len();
-    let mut node_pairs = Vec::with_capacity(n_nodes + 1);
-    let mut total = 0u32;
-    node_pairs.push(0);
-    for &c in &pv.node_pairs {
-        total = total
-            .checked_add(c)
-            .expect("the memory check caps the pairs below u32::MAX");
-        node_pairs.push(total);
-    }
-    let mut pair_cpv = vec![u32::MAX; total as usize];
-    let mut pair_cost = vec![Cost::default(); total as usize];
-    let mut fill: Vec<u32> = node_pairs[..n_nodes].to_vec();
-    // Cells with CPVs: ranges of CPV ids (a cell's CPVs are contiguous).
-    let mut cells: Vec<IdRange> = Vec::new();
-    for (i, c) in pv.cpvs.iter().enumerate() {
-        match cells.last_mut() {
-            Some(r) if pv.cpvs[r.start as usize].kd == c.kd => r.end = i as u32 + 1,
-            _ => cells.push(IdRange::new(i as u32, i as u32 + 1)),
-        }
-    }
-    let lods = Counters::new();
-    for chunk in cells.chunks(16) {
-        if ctx.cancelled() {
-            break;
-        }
-        let lists: Vec<Vec<Vec<(u32, Cost)>>> = chunk
-            .par_iter()
-            .map(|r| {
-                let first = &pv.cpvs[r.start as usize];
-                let node = &pv.kd[first.kd as usize];
-                let visible = ctx.visibility.and_then(|v| v.region(node.lo, node.hi));
-                let costs = RegionCosts::new(ctx, &first.region, visible.as_deref(), &lods);
-                pv.cpvs[r.indices()]
-                    .iter()
-                    .map(|c| {
-                        let (cost, list) = cpv_clusters(ctx, &costs, &c.region, &c.vdi);
-                        debug_assert_eq!((cost, list.len()), (c.cost, c.listed as usize));
-                        list
-                    })
-                    .collect()
-            })
-            .collect();
-        for (r, lists) in chunk.iter().zip(lists) {
-            for (ci, list) in r.indices().zip(lists) {
-                for (n, cost) in list {
-                    let at = fill[n as usize] as usize;
-                    pair_cpv[at] = ci as u32;
-                    pair_cost[at] = cost;
-                    fill[n as usize] += 1;
-                }
-            }
-        }
-    }
-    (node_pairs, pair_cpv, pair_cost)
 }
 
 /// Axis grid of shaft directions: azimuth steps always, elevation steps when
@@ -245,6 +150,94 @@ impl AxisGrid {
             }
         }
     }
+}
+
+/// The shafts' half-angles (radians, at most 90°), ascending, without
+/// repeats.
+fn half_angles(job: &Job) -> Vec<f64> {
+    let mut alphas: Vec<f64> = job
+        .candidates
+        .apex_angles_deg
+        .iter()
+        .map(|a| (a * 0.5).to_radians().min(PI / 2.0))
+        .collect();
+    alphas.sort_by(f64::total_cmp);
+    alphas.dedup();
+    alphas
+}
+
+/// An estimate of the served-list entries candidate generation will make,
+/// for predicting memory before candidates exist: the CPVs' groups times the
+/// mean number of candidate blocks (a shaft angle and axis, or a box) whose
+/// view cell holds the cell of a sampled group. The groups are those listed
+/// by the first CPV of up to 32 cells spread over the CPVs; a block is
+/// counted whether or not its impostor would help there, so the estimate
+/// leans high.
+pub fn estimate_served(ctx: &Context, job: &Job, pv: &ProblemViews) -> u64 {
+    let [_, _, groups] = crate::views::PairCounts::totals(&pv.node_counts);
+    if groups == 0 {
+        return 0;
+    }
+    let grid = AxisGrid::new(job);
+    let method = job.method();
+    let shafts = matches!(method, Method::Shafts | Method::Both | Method::ShaftsPrune);
+    let boxes = matches!(method, Method::Boxes | Method::Both | Method::PerCell);
+    let alphas = half_angles(job);
+    let mut firsts: Vec<usize> = (0..pv.cpvs.len())
+        .filter(|&i| i == 0 || pv.cpvs[i - 1].kd != pv.cpvs[i].kd)
+        .collect();
+    let step = firsts.len().div_ceil(32).max(1);
+    firsts = firsts.into_iter().step_by(step).collect();
+    let h = ctx.hierarchy;
+    let counts: Vec<(u64, u64)> = firsts
+        .par_iter()
+        .map(|&i| {
+            let c = &pv.cpvs[i];
+            let kd = &pv.kd[c.kd as usize];
+            let visible = ctx.visibility.and_then(|v| v.region(kd.lo, kd.hi));
+            let costs = crate::views::RegionCosts::new(
+                ctx,
+                &c.region,
+                visible.as_deref(),
+                &crate::views::Counters::new(),
+            );
+            let (_, list) = crate::views::cpv_clusters(ctx, &costs, &c.region, &c.vdi);
+            let mut depth = 0u64;
+            let mut up = c.kd;
+            while up != u32::MAX {
+                depth += 1;
+                up = pv.kd[up as usize].parent;
+            }
+            let mut blocks = 0u64;
+            for &(n, _) in &list {
+                let sphere = h.nodes[n as usize].sphere;
+                if boxes {
+                    blocks += depth;
+                }
+                let dist = c.region.distance_to_point(sphere.center);
+                if !shafts || sphere.radius <= 0.0 || dist < 2.0 * sphere.radius {
+                    continue;
+                }
+                let corners = c.region.corners().map(|p| (p - sphere.center).normalize());
+                let w = (c.region.center() - sphere.center).normalize();
+                for &alpha in &alphas {
+                    let cos = alpha.cos() - 1e-12;
+                    grid.near(w, alpha, |m, j| {
+                        let u = grid.axis(m, j);
+                        blocks += u64::from(corners.iter().all(|d| d.dot(u) >= cos));
+                    });
+                }
+            }
+            (list.len() as u64, blocks)
+        })
+        .collect();
+    let (sampled, blocks) = counts
+        .iter()
+        .fold((0u64, 0u64), |(a, b), &(x, y)| (a + x, b + y));
+    if sampled == 0 {
+        return 0;
+    }
+    (groups as f64 * blocks as f64 / sampled as f64).ceil() as u64
 }
 
 /// Half-angle of the cone around `axis` containing the unit directions
@@ -381,42 +374,14 @@ pub fn generate(ctx: &Context, job: &Job, pv: &ProblemViews) -> Candidates {
     let boxes = matches!(method, Method::Boxes | Method::Both | Method::PerCell);
     // Per-cell: one box size only, the cells' ancestors `level` levels up.
     let per_cell = (method == Method::PerCell).then_some(job.per_cell.level);
-    let mut alphas: Vec<f64> = job
-        .candidates
-        .apex_angles_deg
-        .iter()
-        .map(|a| (a * 0.5).to_radians().min(PI / 2.0))
-        .collect();
-    alphas.sort_by(f64::total_cmp);
-    alphas.dedup();
+    let alphas = half_angles(job);
     let steps = job.candidates.min_distance_steps.max(1);
     let last_k = job.candidates.min_distance_doublings.saturating_mul(steps);
 
-    // The (cluster → CPVs) pairs, then each cluster's split into groups of
-    // one cell (CPVs of one cell are contiguous, so the groups are too).
-    let (node_pairs, pair_cpv, pair_cost) = collect_pairs(ctx, pv);
+    // The (cluster → CPVs) pairs, grouped by cell.
+    let pairs = Pairs::collect(ctx, pv);
     if ctx.cancelled() {
         return Candidates::default();
-    }
-    let mut groups: Vec<Group> = Vec::new();
-    let mut node_groups = vec![(0u32, 0u32); h.nodes.len()];
-    for n in 0..h.nodes.len() {
-        let g0 = groups.len() as u32;
-        let (a, b) = (node_pairs[n] as usize, node_pairs[n + 1] as usize);
-        let center = h.nodes[n].sphere.center;
-        let mut s = a;
-        for k in a + 1..=b {
-            if k == b || pv.cpvs[pair_cpv[k] as usize].kd != pv.cpvs[pair_cpv[s] as usize].kd {
-                let first = &pv.cpvs[pair_cpv[s] as usize];
-                groups.push(Group {
-                    pairs: IdRange::new(s as u32, k as u32),
-                    kd: first.kd,
-                    dist: first.region.distance_to_point(center),
-                });
-                s = k;
-            }
-        }
-        node_groups[n] = (g0, groups.len() as u32);
     }
 
     // Per cluster: the candidates and, for each, the local list of groups it
@@ -424,7 +389,7 @@ pub fn generate(ctx: &Context, job: &Job, pv: &ProblemViews) -> Candidates {
     let per_node: Vec<(Vec<Candidate>, Vec<u32>)> = (0..h.nodes.len() as u32)
         .into_par_iter()
         .map(|n| {
-            let (g0, g1) = node_groups[n as usize];
+            let IdRange { start: g0, end: g1 } = pairs.groups_of(n);
             if g0 == g1 || ctx.cancelled() {
                 return (Vec::new(), Vec::new());
             }
@@ -432,8 +397,7 @@ pub fn generate(ctx: &Context, job: &Job, pv: &ProblemViews) -> Candidates {
             // Directions of each group's cell corners from the cluster.
             let corner_dirs: Vec<[DVec3; 8]> = (g0..g1)
                 .map(|g| {
-                    let gr = groups[g as usize];
-                    let region = pv.cpvs[pair_cpv[gr.pairs.start as usize] as usize].region;
+                    let region = pv.cpvs[pairs.first_cpv(pairs.group(g)) as usize].region;
                     region.corners().map(|p| (p - sphere.center).normalize())
                 })
                 .collect();
@@ -441,16 +405,16 @@ pub fn generate(ctx: &Context, job: &Job, pv: &ProblemViews) -> Candidates {
             // (key, group) for every cell inside the key's view cell.
             let mut tuples: Vec<(Key, u32)> = Vec::new();
             for g in g0..g1 {
-                let gr = groups[g as usize];
-                let first = &pv.cpvs[pair_cpv[gr.pairs.start as usize] as usize];
+                let gr = pairs.group(g);
+                let first = &pv.cpvs[pairs.first_cpv(gr) as usize];
                 let region = first.region;
                 let dist = gr.dist;
                 // Some CPV of the cell is accelerated by an impostor of `spec`.
                 let helps = |spec: &ImpostorSpec| {
                     let imp = ctx.model.impostor(spec.layers, sphere.radius, dist);
-                    gr.pairs.indices().any(|p| {
-                        let cur = pv.cpvs[pair_cpv[p] as usize].cost;
-                        ctx.model.frame_time(cur - pair_cost[p] + imp) < ctx.model.frame_time(cur)
+                    pairs.iter(gr).any(|(c, cost)| {
+                        let cur = pv.cpvs[c as usize].cost;
+                        ctx.model.frame_time(cur - cost + imp) < ctx.model.frame_time(cur)
                     })
                 };
                 if shafts && size > 0.0 && dist >= size {
@@ -602,7 +566,7 @@ pub fn generate(ctx: &Context, job: &Job, pv: &ProblemViews) -> Candidates {
                             // cells are served, at the resolution and layer
                             // count their distance needs.
                             for &(_, g) in &tuples[s..t] {
-                                nearest = nearest.min(groups[g as usize].dist);
+                                nearest = nearest.min(pairs.group(g).dist);
                             }
                             let d = ladder_distance(size, k, steps).max(nearest);
                             // Likewise it narrows to the smallest cone
@@ -663,8 +627,10 @@ pub fn generate(ctx: &Context, job: &Job, pv: &ProblemViews) -> Candidates {
             (cands, served)
         })
         .collect();
-    let mut list = Vec::new();
-    let mut served = Vec::new();
+    // Moved out cluster by cluster into vectors of their final size, so
+    // the candidates are not held twice.
+    let mut list = Vec::with_capacity(per_node.iter().map(|p| p.0.len()).sum());
+    let mut served = Vec::with_capacity(per_node.iter().map(|p| p.1.len()).sum());
     for (mut cands, local) in per_node {
         let offset = served.len() as u32;
         for c in &mut cands {
@@ -675,10 +641,7 @@ pub fn generate(ctx: &Context, job: &Job, pv: &ProblemViews) -> Candidates {
     }
     Candidates {
         list,
-        pair_cpv,
-        pair_cost,
-        node_pairs,
-        groups,
+        pairs,
         served,
     }
 }

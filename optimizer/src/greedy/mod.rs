@@ -88,8 +88,8 @@ struct State<'a> {
     pv: &'a ProblemViews,
     cands: &'a [Candidate],
     all: &'a Candidates,
-    /// Per CPV: for its adjusted clusters, in node order, what the
-    /// impostors placed below them save against their objects.
+    /// Per cluster: for the CPVs where it is adjusted, in CPV order, what
+    /// the impostors placed below it there save against its objects.
     adjustments: Vec<Vec<Cost>>,
     /// Per (CPV, cluster): covered when an impostor of the cluster or an
     /// ancestor is placed there (a subtree is a range of pre-order ids),
@@ -110,18 +110,21 @@ struct State<'a> {
 }
 
 /// Two bits per (CPV, hierarchy node), covered and adjusted (see
-/// [`State`]), with a rank directory over the adjusted bits: a cluster's
-/// adjustment sits at its rank in the CPV's `adjustments`. Per 64 nodes,
-/// three adjacent words (covered, adjusted, adjusted bits before them in
-/// the row), so one cache line answers a lookup: under half a byte per
-/// (CPV, node) where the per-pair state it replaces took 21 bytes a pair.
+/// [`State`]), stored by node, with a rank directory over the adjusted
+/// bits: an adjusted (CPV, cluster)'s adjustment sits at its rank in the
+/// cluster's `adjustments`. Per node and 64 CPVs, three adjacent words
+/// (covered, adjusted, adjusted bits before them in the node's row).
+/// Scoring walks one cluster's pairs, whose CPVs are contiguous ids within
+/// a cell, so consecutive lookups share cache lines, in the marks and in
+/// the adjustments: 3/8 byte per (CPV, node).
 struct NodeMarks {
-    /// Words per CPV.
+    /// Words per node.
     row: usize,
     bits: Vec<u64>,
 }
 
 /// What [`NodeMarks`] says of a (CPV, cluster).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
 enum Mark {
     /// Neither covered nor adjusted: represented by its objects.
     Plain,
@@ -133,21 +136,21 @@ enum Mark {
 /// Bytes of the greedy's marks for `cpvs` CPVs over a hierarchy of `nodes`
 /// nodes (part of the memory `place` predicts).
 pub fn marks_bytes(cpvs: usize, nodes: usize) -> u64 {
-    (cpvs * 3 * nodes.div_ceil(64) * 8) as u64
+    (nodes * 3 * cpvs.div_ceil(64) * 8) as u64
 }
 
 impl NodeMarks {
     fn new(cpvs: usize, nodes: usize) -> Self {
-        let row = 3 * nodes.div_ceil(64);
+        let row = 3 * cpvs.div_ceil(64);
         NodeMarks {
             row,
-            bits: vec![0; cpvs * row],
+            bits: vec![0; nodes * row],
         }
     }
 
     fn get(&self, c: u32, n: u32) -> Mark {
-        let at = c as usize * self.row + 3 * (n as usize / 64);
-        let b = n % 64;
+        let at = n as usize * self.row + 3 * (c as usize / 64);
+        let b = c % 64;
         let (cov, adj) = (self.bits[at], self.bits[at + 1]);
         if cov >> b & 1 == 1 {
             Mark::Covered
@@ -159,27 +162,54 @@ impl NodeMarks {
         }
     }
 
-    /// Marks `n` adjusted in CPV `c`: its rank, and whether it is new.
-    fn adjust(&mut self, c: u32, n: u32) -> (usize, bool) {
-        let row = &mut self.bits[c as usize * self.row..][..self.row];
-        let at = 3 * (n as usize / 64);
-        let b = n % 64;
-        let rank = row[at + 2] as usize + (row[at + 1] & ((1u64 << b) - 1)).count_ones() as usize;
-        if row[at + 1] >> b & 1 == 1 {
-            return (rank, false);
+    /// Adds `saving` to cluster `n`'s adjustment in each CPV of `changes`
+    /// (ascending CPV ids), marking it adjusted where it was not: one pass
+    /// over the node's row and its `adjustments`.
+    fn adjust(&mut self, n: u32, changes: &[(u32, Cost)], adjustments: &mut Vec<Cost>) {
+        let row = &mut self.bits[n as usize * self.row..][..self.row];
+        let rank = |row: &[u64], c: u32| {
+            let at = 3 * (c as usize / 64);
+            let below = row[at + 1] & ((1u64 << (c % 64)) - 1);
+            row[at + 2] as usize + below.count_ones() as usize
+        };
+        // Existing adjustments first, while the ranks are unchanged; the
+        // new ones with the rank they get among the old ones.
+        let mut new: Vec<(usize, Cost)> = Vec::new();
+        for &(c, saving) in changes {
+            let k = rank(row, c);
+            if row[3 * (c as usize / 64) + 1] >> (c % 64) & 1 == 1 {
+                adjustments[k] += saving;
+            } else {
+                new.push((k, saving));
+            }
         }
-        row[at + 1] |= 1 << b;
-        for later in row[at + 3..].chunks_exact_mut(3) {
-            later[2] += 1;
+        if new.is_empty() {
+            return;
         }
-        (rank, true)
+        for &(c, _) in changes {
+            row[3 * (c as usize / 64) + 1] |= 1 << (c % 64);
+        }
+        let mut merged = Vec::with_capacity(adjustments.len() + new.len());
+        let mut from = 0;
+        for (k, saving) in new {
+            merged.extend_from_slice(&adjustments[from..k]);
+            merged.push(saving);
+            from = k;
+        }
+        merged.extend_from_slice(&adjustments[from..]);
+        *adjustments = merged;
+        let mut before = 0u64;
+        for w in row.chunks_exact_mut(3) {
+            w[2] = before;
+            before += u64::from(w[1].count_ones());
+        }
     }
 
     /// Marks `a..b` covered in CPV `c`.
     fn cover(&mut self, c: u32, a: u32, b: u32) {
-        let row = &mut self.bits[c as usize * self.row..][..self.row];
+        let (word, bit) = (3 * (c as usize / 64), c % 64);
         for n in a..b {
-            row[3 * (n as usize / 64)] |= 1 << (n % 64);
+            self.bits[n as usize * self.row + word] |= 1 << bit;
         }
     }
 }
@@ -201,7 +231,7 @@ impl<'a> State<'a> {
             pv,
             cands: &cands.list,
             all: cands,
-            adjustments: vec![Vec::new(); pv.cpvs.len()],
+            adjustments: vec![Vec::new(); ctx.hierarchy.nodes.len()],
             marks: NodeMarks::new(pv.cpvs.len(), ctx.hierarchy.nodes.len()),
             unsolved_in_cell: {
                 let mut v = vec![0u32; pv.kd.len()];
@@ -245,14 +275,14 @@ impl<'a> State<'a> {
         match self.marks.get(c, node) {
             Mark::Covered => None,
             Mark::Plain => Some(orig),
-            Mark::Adjusted(rank) => Some(orig - self.adjustments[c as usize][rank]),
+            Mark::Adjusted(rank) => Some(orig - self.adjustments[node as usize][rank]),
         }
     }
 
-    /// The effect on CPV `c` of replacing cluster `node`, listed there as
-    /// pair `p`, by an impostor costing `imp`.
-    fn effect(&self, c: u32, node: u32, p: u32, imp: Cost) -> Option<Effect> {
-        let rep = self.representation(c, node, self.all.pair_cost[p as usize])?;
+    /// The effect on CPV `c` of replacing cluster `node`, whose objects
+    /// in the CPV's enclosing set cost `orig`, by an impostor costing `imp`.
+    fn effect(&self, c: u32, node: u32, orig: Cost, imp: Cost) -> Option<Effect> {
+        let rep = self.representation(c, node, orig)?;
         let cur = self.sel.cpv_cost[c as usize];
         let new_cost = cur - rep + imp;
         let m = &self.ctx.model;
@@ -277,12 +307,11 @@ impl<'a> State<'a> {
         let cand = &self.cands[i as usize];
         let s = self.ctx.hierarchy.nodes[cand.node as usize].sphere;
         for &g in &all.served[cand.served.indices()] {
-            let gr = all.groups[g as usize];
+            let gr = all.pairs.group(g);
             // All CPVs of a group share their region, hence the impostor's cost.
             let imp = self.ctx.model.impostor(cand.spec.layers, s.radius, gr.dist);
-            for p in gr.pairs.indices() {
-                let c = all.pair_cpv[p];
-                if let Some(e) = self.effect(c, cand.node, p as u32, imp) {
+            for (c, orig) in all.pairs.iter(gr) {
+                if let Some(e) = self.effect(c, cand.node, orig, imp) {
                     f(c, e);
                 }
             }
@@ -303,17 +332,16 @@ impl<'a> State<'a> {
         let all = self.all;
         let s = self.ctx.hierarchy.nodes[node as usize].sphere;
         for &g in &all.served[groups] {
-            let gr = all.groups[g as usize];
+            let gr = all.pairs.group(g);
             if self.unsolved_in_cell[gr.kd as usize] == 0 {
                 continue;
             }
             let imp = self.ctx.model.impostor(layers, s.radius, gr.dist);
-            for p in gr.pairs.indices() {
-                let c = all.pair_cpv[p];
+            for (c, orig) in all.pairs.iter(gr) {
                 if self.ctx.model.frame_time(self.sel.cpv_cost[c as usize]) <= self.ctx.t_max {
                     continue;
                 }
-                if let Some(e) = self.effect(c, node, p as u32, imp) {
+                if let Some(e) = self.effect(c, node, orig, imp) {
                     *sum += e.delta;
                 }
             }
@@ -351,26 +379,23 @@ impl<'a> State<'a> {
                 changes.push((c, e.new_cost, e.saving));
             }
         });
+        // The impostor replaces the cluster's representation: every
+        // ancestor's gets cheaper by the difference.
+        changes.sort_unstable_by_key(|x| x.0);
         let h = self.ctx.hierarchy;
         let node = self.cands[i as usize].node;
         let end = h.nodes[node as usize].subtree_end;
-        for (c, cost, saving) in changes {
+        let savings: Vec<(u32, Cost)> = changes.iter().map(|&(c, _, s)| (c, s)).collect();
+        let mut up = h.nodes[node as usize].parent;
+        while up != u32::MAX {
+            self.marks
+                .adjust(up, &savings, &mut self.adjustments[up as usize]);
+            up = h.nodes[up as usize].parent;
+        }
+        for (c, cost, _) in changes {
             let cu = c as usize;
             let cpv = &self.pv.cpvs[cu];
-            // The impostor replaces the cluster's representation: every
-            // ancestor's gets cheaper by the difference.
             self.marks.cover(c, node, end);
-            let mut up = h.nodes[node as usize].parent;
-            while up != u32::MAX {
-                let (rank, new) = self.marks.adjust(c, up);
-                let adj = &mut self.adjustments[cu];
-                if new {
-                    adj.insert(rank, saving);
-                } else {
-                    adj[rank] += saving;
-                }
-                up = h.nodes[up as usize].parent;
-            }
             let imps = &mut self.sel.cpv_impostors[cu];
             let cands = self.cands;
             let uses = &mut self.sel.uses;
@@ -401,7 +426,7 @@ impl<'a> State<'a> {
         let all = self.all;
         all.served[self.cands[i as usize].served.indices()]
             .iter()
-            .all(|&g| self.cell_changed[all.groups[g as usize].kd as usize] <= stamp)
+            .all(|&g| self.cell_changed[all.pairs.group(g).kd as usize] <= stamp)
     }
 }
 
@@ -587,7 +612,7 @@ pub fn prune(ctx: &Context, pv: &ProblemViews, cands: &Candidates, sel: &mut Sel
         let mut ok = true;
         for &c in &users[i as usize] {
             let cpv = &pv.cpvs[c as usize];
-            let Some(orig) = cands.pair_cost_of(cands.list[i as usize].node, c) else {
+            let Some(orig) = cands.pairs.cost_of(cands.list[i as usize].node, c) else {
                 ok = false;
                 break;
             };
@@ -619,6 +644,55 @@ mod tests {
     use crate::testutil::{synthetic_city, synthetic_job};
     use crate::views;
     use crate::views::Counters;
+
+    /// The node-major marks with their batched rank directory agree with
+    /// a plain map of (CPV, cluster) to adjustment.
+    #[test]
+    fn marks_and_adjustments_match_a_map() {
+        use std::collections::BTreeMap;
+        let (cpvs, nodes) = (300usize, 9usize);
+        let mut marks = NodeMarks::new(cpvs, nodes);
+        let mut adjustments = vec![Vec::new(); nodes];
+        let mut want: BTreeMap<(u32, u32), f64> = BTreeMap::new();
+        let mut covered = std::collections::BTreeSet::new();
+        let mut rng = crate::math::rng::Rng::new(5);
+        for round in 0..200 {
+            let n = (rng.next_u64() % nodes as u64) as u32;
+            let mut cs: Vec<u32> = (0..1 + rng.next_u64() % 40)
+                .map(|_| (rng.next_u64() % cpvs as u64) as u32)
+                .collect();
+            cs.sort_unstable();
+            cs.dedup();
+            let changes: Vec<(u32, Cost)> = cs
+                .iter()
+                .map(|&c| {
+                    let x = f64::from(round) + f64::from(c) * 1e-3;
+                    (c, Cost { cpu: x, gpu: 0.0 })
+                })
+                .collect();
+            marks.adjust(n, &changes, &mut adjustments[n as usize]);
+            for &(c, s) in &changes {
+                *want.entry((c, n)).or_default() += s.cpu;
+            }
+            if round % 17 == 0 {
+                let c = cs[0];
+                marks.cover(c, n, n + 1);
+                covered.insert((c, n));
+            }
+        }
+        for c in 0..cpvs as u32 {
+            for n in 0..nodes as u32 {
+                match marks.get(c, n) {
+                    Mark::Covered => assert!(covered.contains(&(c, n))),
+                    Mark::Plain => assert!(!want.contains_key(&(c, n))),
+                    Mark::Adjusted(rank) => {
+                        assert!(!covered.contains(&(c, n)));
+                        assert_eq!(adjustments[n as usize][rank].cpu, want[&(c, n)]);
+                    }
+                }
+            }
+        }
+    }
 
     #[test]
     fn block_scores_equal_single_scores_bit_for_bit() {

@@ -5,14 +5,14 @@ mod assemble;
 
 use std::time::Instant;
 
-use crate::api::job::Method;
+use crate::api::job::{Job, Method};
 use crate::api::placement::Placement;
 use crate::api::stats::{StageTime, Stats};
 use crate::candidates;
 use crate::control::Control;
 use crate::greedy;
 use crate::input::Prepared;
-use crate::views::{self, Context, Counters, ProblemViews};
+use crate::views::{self, Context, Counters, PairCounts, ProblemViews};
 use crate::{Error, Result};
 
 pub use assemble::{assemble, build_placement};
@@ -86,7 +86,7 @@ impl Prepared<'_> {
         let pv = views::approximate(&ctx, job, &counters);
         st.end("problem_views");
         ctl.check()?;
-        let predicted = predicted_peak_bytes(&pv, counters.pairs());
+        let predicted = predicted_peak_bytes(&ctx, job, &pv);
         let limit = opts.max_memory_bytes.unwrap_or_else(machine_memory_bytes);
         if predicted > limit || counters.pairs() >= u64::from(u32::MAX) {
             return Err(Error::bad(
@@ -160,7 +160,10 @@ impl Prepared<'_> {
         st.end("placement");
 
         let stats = Stats {
-            candidate_pairs: cands.pair_cpv.len() as u64,
+            candidate_pairs: cands.pairs.len(),
+            stored_pair_costs: cands.pairs.stored_len(),
+            pair_groups: cands.pairs.groups_len(),
+            served_entries: cands.served.len() as u64,
             candidates: cands.list.len() as u64,
             greedy_choices: sel.accepted,
             score_evaluations: sel.evaluations,
@@ -208,22 +211,38 @@ impl Prepared<'_> {
 }
 
 /// Bytes a run holds per (CPV, cluster) pair from candidate generation on:
-/// the pair itself (CPV id and cost, 20 bytes), its share of the groups
-/// (about 2 bytes), the served lists (4–5 bytes), the candidates and the
-/// greedy's heap (about 5 bytes), and the allocator's slack; measured on the
-/// generated city (46 bytes a pair at the peak) and rounded up.
-pub const BYTES_PER_PAIR: u64 = 50;
+/// its CPV id.
+pub const BYTES_PER_PAIR: u64 = 4;
 
-/// The peak memory a placement of `pv`, whose CPVs list `pairs` (CPV,
-/// cluster) pairs, is predicted to need: what the process holds now, the
-/// pairs and what grows with them, the per-CPV greedy state (costs, lists
-/// and the CPV itself, about 256 bytes) and the greedy's marks per (CPV,
-/// hierarchy node).
-pub fn predicted_peak_bytes(pv: &ProblemViews, pairs: u64) -> u64 {
+/// Bytes per pair whose cost is stored (its cluster is partly outside the
+/// CPV's enclosing set).
+pub const BYTES_PER_STORED: u64 = 16;
+
+/// Bytes a run holds per group (one cluster's pairs in one cell), besides
+/// its served-list entries: the group itself (40 bytes) and the allocator's
+/// slack.
+pub const BYTES_PER_GROUP: u64 = 48;
+
+/// Bytes per entry of the candidates' served lists: the group id (4
+/// bytes) and its share of the candidates (about 130 bytes each; 1–13
+/// candidates per 100 entries measured) and the greedy's heap.
+pub const BYTES_PER_SERVED: u64 = 12;
+
+/// The peak memory a placement of `pv` is predicted to need: what the
+/// process holds now, the pairs and groups its CPVs list, the served lists
+/// ([`candidates::estimate_served`] entries) and what grows with them, the
+/// per-CPV greedy state (costs, lists and the CPV itself, about 256 bytes)
+/// and the greedy's marks per (CPV, hierarchy node).
+pub fn predicted_peak_bytes(ctx: &Context, job: &Job, pv: &ProblemViews) -> u64 {
+    let [pairs, stored, groups] = PairCounts::totals(&pv.node_counts);
+    let served = candidates::estimate_served(ctx, job, pv);
     current_rss_bytes()
         + pairs * BYTES_PER_PAIR
+        + stored * BYTES_PER_STORED
+        + groups * BYTES_PER_GROUP
+        + served * BYTES_PER_SERVED
         + pv.cpvs.len() as u64 * 256
-        + greedy::marks_bytes(pv.cpvs.len(), pv.node_pairs.len())
+        + greedy::marks_bytes(pv.cpvs.len(), pv.node_counts.len())
 }
 
 /// The machine's memory, bytes (`MemTotal`; `u64::MAX` when unknown).
@@ -487,11 +506,8 @@ mod tests {
         let cands = candidates::generate(&ctx, &job, &pv);
         let mut checked = 0;
         for (i, c) in cands.list.iter().enumerate() {
-            cands.for_each_served(i as u32, |cpv, p| {
-                assert_eq!(
-                    cands.pair_cost_of(c.node, cpv),
-                    Some(cands.pair_cost[p as usize])
-                );
+            cands.for_each_served(i as u32, |cpv, cost| {
+                assert_eq!(cands.pairs.cost_of(c.node, cpv), Some(cost));
                 let cpv = &pv.cpvs[cpv as usize];
                 assert!(c.cell.contains_box(&cpv.region), "{c:?} {:?}", cpv.region);
                 checked += 1;

@@ -7,7 +7,7 @@ use crate::math::geom::{Aabb, Vdi};
 use crate::math::grid::Grid;
 use crate::views::context::{Context, Counters};
 use crate::views::costs::{RegionCosts, cpv_clusters, exceeds_target};
-use crate::views::{Cpv, KdNode, ProblemViews, leaf_level};
+use crate::views::{Cpv, KdNode, PairCounts, ProblemViews, leaf_level};
 
 /// Builds the kd tree over the grid (pre-order).
 fn build_kd(grid: &Grid) -> Vec<KdNode> {
@@ -70,8 +70,8 @@ fn ancestors(leaves: &[Vdi]) -> Vec<Vdi> {
 
 struct RegionResult {
     cpvs: Vec<Cpv>,
-    /// Per cluster, how many of `cpvs` list it (empty when there are none).
-    node_pairs: Vec<u32>,
+    /// Per cluster, how often `cpvs` list it (empty when there are none).
+    node_counts: Vec<PairCounts>,
     cones: u64,
     regions: u64,
     /// Problem views of minimum size proven by refinement.
@@ -82,7 +82,7 @@ impl RegionResult {
     fn empty(cones: u64, regions: u64, refined: u64) -> RegionResult {
         RegionResult {
             cpvs: Vec::new(),
-            node_pairs: Vec::new(),
+            node_counts: Vec::new(),
             cones,
             regions,
             refined,
@@ -182,13 +182,16 @@ fn process(
             // Each CPV keeps only how many clusters it lists; the lists are
             // counted per cluster here and computed again, a cell at a
             // time, by candidate generation.
-            let mut node_pairs = vec![0u32; ctx.hierarchy.nodes.len()];
+            let mut node_counts = vec![PairCounts::default(); ctx.hierarchy.nodes.len()];
             let cpvs = problems
                 .into_iter()
                 .map(|vdi| {
                     let (cost, nodes) = cpv_clusters(ctx, &costs, &region, &vdi);
-                    for &(n, _) in &nodes {
-                        node_pairs[n as usize] += 1;
+                    for &(n, c) in &nodes {
+                        let e = &mut node_counts[n as usize];
+                        e.pairs += 1;
+                        e.partial += u32::from(c != costs.nodes[n as usize]);
+                        e.cells = 1;
                     }
                     Cpv {
                         kd: id,
@@ -204,7 +207,7 @@ fn process(
             counters.add_pairs(pairs);
             RegionResult {
                 cpvs,
-                node_pairs,
+                node_counts,
                 cones,
                 regions: 1,
                 refined,
@@ -217,12 +220,12 @@ fn process(
                 || process(ctx, counters, kd, r, &problems, levels),
             );
             a.cpvs.extend(b.cpvs);
-            let node_pairs = match (a.node_pairs.is_empty(), b.node_pairs.is_empty()) {
-                (_, true) => a.node_pairs,
-                (true, false) => b.node_pairs,
+            let node_counts = match (a.node_counts.is_empty(), b.node_counts.is_empty()) {
+                (_, true) => a.node_counts,
+                (true, false) => b.node_counts,
                 (false, false) => {
-                    let mut sum = a.node_pairs;
-                    for (x, y) in sum.iter_mut().zip(b.node_pairs) {
+                    let mut sum = a.node_counts;
+                    for (x, y) in sum.iter_mut().zip(b.node_counts) {
                         *x += y;
                     }
                     sum
@@ -230,7 +233,7 @@ fn process(
             };
             RegionResult {
                 cpvs: a.cpvs,
-                node_pairs,
+                node_counts,
                 cones: cones + a.cones + b.cones,
                 regions: 1 + a.regions + b.regions,
                 refined: a.refined + b.refined,
@@ -268,10 +271,10 @@ pub fn approximate(ctx: &Context, job: &Job, counters: &Counters) -> ProblemView
         grid,
         kd,
         cpvs: res.cpvs,
-        node_pairs: if res.node_pairs.is_empty() {
-            vec![0; ctx.hierarchy.nodes.len()]
+        node_counts: if res.node_counts.is_empty() {
+            vec![PairCounts::default(); ctx.hierarchy.nodes.len()]
         } else {
-            res.node_pairs
+            res.node_counts
         },
         leaf_level: level,
         cone_evaluations: res.cones,

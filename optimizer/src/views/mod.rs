@@ -61,6 +61,40 @@ pub struct Cpv {
     pub listed: u32,
 }
 
+/// How often one cluster is listed by CPVs (see [`Cpv::listed`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct PairCounts {
+    /// CPVs that list the cluster: its (CPV, cluster) pairs.
+    pub pairs: u32,
+    /// Of those, the pairs whose cost differs from the cluster's whole cost
+    /// in the CPV's cell (the cluster is partly outside the enclosing set):
+    /// their costs are stored, the others derive from the cell's.
+    pub partial: u32,
+    /// Cells with a CPV listing the cluster (its groups).
+    pub cells: u32,
+}
+
+impl std::ops::AddAssign for PairCounts {
+    fn add_assign(&mut self, o: PairCounts) {
+        self.pairs += o.pairs;
+        self.partial += o.partial;
+        self.cells += o.cells;
+    }
+}
+
+impl PairCounts {
+    /// The totals over every cluster of `counts`, as 64-bit sums.
+    pub fn totals(counts: &[PairCounts]) -> [u64; 3] {
+        counts.iter().fold([0u64; 3], |[p, q, c], n| {
+            [
+                p + u64::from(n.pairs),
+                q + u64::from(n.partial),
+                c + u64::from(n.cells),
+            ]
+        })
+    }
+}
+
 /// The result of the approximation.
 #[derive(Clone, Debug)]
 pub struct ProblemViews {
@@ -70,8 +104,9 @@ pub struct ProblemViews {
     pub kd: Vec<KdNode>,
     /// The CPVs, in kd order (each kd node's CPVs are contiguous).
     pub cpvs: Vec<Cpv>,
-    /// Per cluster (node id): how many CPVs list it.
-    pub node_pairs: Vec<u32>,
+    /// Per cluster (node id): how many CPVs list it, in how many cells,
+    /// and how many of those pairs need their own cost.
+    pub node_counts: Vec<PairCounts>,
     /// Quadtree level of minimum-size VDIs.
     pub leaf_level: u8,
     /// Enclosing frusta evaluated (a work counter for statistics).
