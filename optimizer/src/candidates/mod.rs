@@ -111,6 +111,19 @@ impl AxisGrid {
         DVec3::new(el.cos() * az.cos(), el.sin(), el.cos() * az.sin())
     }
 
+    /// Calls `f(m, j)` for every grid axis whose cone of half-angle
+    /// `alpha` holds every unit direction of `corners` (a cell's corners
+    /// seen from a cluster, `w` the direction of its centre).
+    fn holding(&self, w: DVec3, alpha: f64, corners: &[DVec3; 8], mut f: impl FnMut(i32, u32)) {
+        let cos = alpha.cos() - 1e-12;
+        self.near(w, alpha, |m, j| {
+            let u = self.axis(m, j);
+            if corners.iter().all(|c| c.dot(u) >= cos) {
+                f(m, j);
+            }
+        });
+    }
+
     /// Calls `f(m, j)` for every grid axis within `alpha` of unit `w` (and
     /// possibly a few more; callers check exactly).
     fn near(&self, w: DVec3, alpha: f64, mut f: impl FnMut(i32, u32)) {
@@ -183,22 +196,21 @@ pub fn estimate_served(ctx: &Context, job: &Job, pv: &ProblemViews) -> u64 {
     let shafts = matches!(method, Method::Shafts | Method::Both | Method::ShaftsPrune);
     let boxes = matches!(method, Method::Boxes | Method::Both | Method::PerCell);
     let alphas = half_angles(job);
-    let mut firsts: Vec<usize> = (0..pv.cpvs.len())
-        .filter(|&i| i == 0 || pv.cpvs[i - 1].kd != pv.cpvs[i].kd)
+    let cells = pv.cells();
+    let step = cells.len().div_ceil(32).max(1);
+    let firsts: Vec<usize> = cells
+        .iter()
+        .step_by(step)
+        .map(|r| r.start as usize)
         .collect();
-    let step = firsts.len().div_ceil(32).max(1);
-    firsts = firsts.into_iter().step_by(step).collect();
     let h = ctx.hierarchy;
     let counts: Vec<(u64, u64)> = firsts
         .par_iter()
         .map(|&i| {
             let c = &pv.cpvs[i];
-            let kd = &pv.kd[c.kd as usize];
-            let visible = ctx.visibility.and_then(|v| v.region(kd.lo, kd.hi));
-            let costs = crate::views::RegionCosts::new(
+            let costs = crate::views::RegionCosts::of_kd(
                 ctx,
-                &c.region,
-                visible.as_deref(),
+                &pv.kd[c.kd as usize],
                 &crate::views::Counters::new(),
             );
             let (_, list) = crate::views::cpv_clusters(ctx, &costs, &c.region, &c.vdi);
@@ -221,11 +233,7 @@ pub fn estimate_served(ctx: &Context, job: &Job, pv: &ProblemViews) -> u64 {
                 let corners = c.region.corners().map(|p| (p - sphere.center).normalize());
                 let w = (c.region.center() - sphere.center).normalize();
                 for &alpha in &alphas {
-                    let cos = alpha.cos() - 1e-12;
-                    grid.near(w, alpha, |m, j| {
-                        let u = grid.axis(m, j);
-                        blocks += u64::from(corners.iter().all(|d| d.dot(u) >= cos));
-                    });
+                    grid.holding(w, alpha, &corners, |_, _| blocks += 1);
                 }
             }
             (list.len() as u64, blocks)
@@ -429,20 +437,16 @@ pub fn generate(ctx: &Context, job: &Job, pv: &ProblemViews) -> Candidates {
                         if !helps(&spec) {
                             continue;
                         }
-                        let cos = alpha.cos() - 1e-12;
-                        grid.near(w, alpha, |m, j| {
-                            let u = grid.axis(m, j);
-                            if corners.iter().all(|c| c.dot(u) >= cos) {
-                                tuples.push((
-                                    Key::Shaft {
-                                        angle: ai as u8,
-                                        m,
-                                        j,
-                                        k,
-                                    },
-                                    g,
-                                ));
-                            }
+                        grid.holding(w, alpha, corners, |m, j| {
+                            tuples.push((
+                                Key::Shaft {
+                                    angle: ai as u8,
+                                    m,
+                                    j,
+                                    k,
+                                },
+                                g,
+                            ));
                         });
                     }
                 }

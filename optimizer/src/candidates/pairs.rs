@@ -158,14 +158,7 @@ impl Pairs {
             };
             n_groups as usize
         ];
-        // Cells with CPVs: ranges of CPV ids (a cell's CPVs are contiguous).
-        let mut cells: Vec<IdRange> = Vec::new();
-        for (i, c) in pv.cpvs.iter().enumerate() {
-            match cells.last_mut() {
-                Some(r) if pv.cpvs[r.start as usize].kd == c.kd => r.end = i as u32 + 1,
-                _ => cells.push(IdRange::new(i as u32, i as u32 + 1)),
-            }
-        }
+        let cells = pv.cells();
         let h = ctx.hierarchy;
         let lods = Counters::new();
         for chunk in cells.chunks(16) {
@@ -179,10 +172,8 @@ impl Pairs {
             let lists: Vec<CellLists> = chunk
                 .par_iter()
                 .map(|r| {
-                    let first = &pv.cpvs[r.start as usize];
-                    let node = &pv.kd[first.kd as usize];
-                    let visible = ctx.visibility.and_then(|v| v.region(node.lo, node.hi));
-                    let costs = RegionCosts::new(ctx, &first.region, visible.as_deref(), &lods);
+                    let kd = &pv.kd[pv.cpvs[r.start as usize].kd as usize];
+                    let costs = RegionCosts::of_kd(ctx, kd, &lods);
                     let mut listed: Vec<u32> = Vec::new();
                     let lists = pv.cpvs[r.indices()]
                         .iter()

@@ -144,8 +144,7 @@ fn process(
         return RegionResult::empty(0, 0, 0);
     }
     let region = node.aabb;
-    let visible = ctx.visibility.and_then(|v| v.region(node.lo, node.hi));
-    let costs = RegionCosts::new(ctx, &region, visible.as_deref(), counters);
+    let costs = RegionCosts::of_kd(ctx, node, counters);
     let open = ancestors(parent_problems);
     let mut problems: Vec<Vdi> = Vec::new();
     let mut cones = 0u64;

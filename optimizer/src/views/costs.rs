@@ -5,6 +5,7 @@
 use crate::math::enclosing::{Bounds, Enclosing, Overlap, enclosing_cone};
 use crate::math::geom::{Aabb, Vdi};
 use crate::model::cost::Cost;
+use crate::views::KdNode;
 use crate::views::context::{Context, Counters};
 use crate::visibility::ObjectSet;
 
@@ -61,6 +62,12 @@ impl RegionCosts {
             };
         }
         RegionCosts { objects, nodes }
+    }
+
+    /// Costs for the region of kd node `node`, with its cells' visible set.
+    pub fn of_kd(ctx: &Context, node: &KdNode, counters: &Counters) -> RegionCosts {
+        let visible = ctx.visibility.and_then(|v| v.region(node.lo, node.hi));
+        RegionCosts::new(ctx, &node.aabb, visible.as_deref(), counters)
     }
 }
 

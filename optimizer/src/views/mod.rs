@@ -118,6 +118,21 @@ pub struct ProblemViews {
     pub refined_away: u64,
 }
 
+impl ProblemViews {
+    /// The cells with CPVs, as ranges of CPV ids (a cell's CPVs are
+    /// contiguous), in kd order.
+    pub fn cells(&self) -> Vec<crate::math::IdRange> {
+        let mut cells: Vec<crate::math::IdRange> = Vec::new();
+        for (i, c) in self.cpvs.iter().enumerate() {
+            match cells.last_mut() {
+                Some(r) if self.cpvs[r.start as usize].kd == c.kd => r.end = i as u32 + 1,
+                _ => cells.push(crate::math::IdRange::new(i as u32, i as u32 + 1)),
+            }
+        }
+        cells
+    }
+}
+
 /// Quadtree level whose VDIs span at most `min_vdi_deg` (a face spans 90°).
 pub fn leaf_level(min_vdi_deg: f64) -> u8 {
     let mut l = 0u8;
