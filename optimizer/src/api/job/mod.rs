@@ -362,6 +362,16 @@ pub struct CandidateParams {
     /// view space has height), degrees. Default 11.25.
     #[serde(default = "default_dir_step")]
     pub direction_step_deg: f64,
+    /// Spacing of the axes of a shaft of half-angle `α`, as a fraction of
+    /// `α`: axes `max(direction_step_deg, axis_spacing · α)` apart, with
+    /// fewer azimuths on rings of higher elevation (equal spacing over the
+    /// sphere). Wide shafts on a fine grid overlap their neighbours almost
+    /// wholly; spacing them in proportion to their width keeps the choice of
+    /// which cells a shaft serves while listing each cell under fewer
+    /// shafts. 0 puts every angle on the `direction_step_deg` grid.
+    /// Default 0.5.
+    #[serde(default = "default_axis_spacing")]
+    pub axis_spacing: f64,
     /// Shaft minimum distances range from `size` to `size · 2^doublings`, with
     /// size the cluster's diameter. Default 10.
     #[serde(default = "default_doublings")]
@@ -437,6 +447,9 @@ fn default_apex() -> Vec<f64> {
 }
 fn default_dir_step() -> f64 {
     11.25
+}
+fn default_axis_spacing() -> f64 {
+    0.5
 }
 fn default_doublings() -> u32 {
     10
@@ -525,6 +538,7 @@ impl Default for CandidateParams {
             view_cells: default_view_cells(),
             apex_angles_deg: default_apex(),
             direction_step_deg: default_dir_step(),
+            axis_spacing: default_axis_spacing(),
             min_distance_doublings: default_doublings(),
             min_distance_steps: default_distance_steps(),
         }

@@ -162,6 +162,12 @@ impl Job {
                 format!("{} must be in [1, 90]", cp.direction_step_deg),
             ));
         }
+        if !(cp.axis_spacing.is_finite() && (0.0..=2.0).contains(&cp.axis_spacing)) {
+            return Err(bad(
+                "candidates.axis_spacing",
+                format!("{} must be in [0, 2]", cp.axis_spacing),
+            ));
+        }
         if cp.min_distance_doublings > 30 {
             return Err(bad(
                 "candidates.min_distance_doublings",
