@@ -106,6 +106,9 @@ struct State<'a> {
     /// serves, so a key computed after choice `v` is still exact while no
     /// cell it serves changed after `v`.
     cell_changed: Vec<u64>,
+    /// Per CPV: its frame time less `t_max` (solved when not above 0),
+    /// kept with `sel.cpv_cost`.
+    excess: Vec<f64>,
     sel: Selection,
 }
 
@@ -216,7 +219,6 @@ impl NodeMarks {
 
 /// The effect of impostor `i` on one CPV.
 struct Effect {
-    delta: f64,
     accelerates: bool,
     new_cost: Cost,
     /// What the impostor saves against the cluster's current
@@ -241,6 +243,11 @@ impl<'a> State<'a> {
                 v
             },
             cell_changed: vec![0; pv.kd.len()],
+            excess: pv
+                .cpvs
+                .iter()
+                .map(|c| ctx.model.frame_time(c.cost) - ctx.t_max)
+                .collect(),
             sel: Selection {
                 cpv_impostors: vec![Vec::new(); pv.cpvs.len()],
                 cpv_cost: pv.cpvs.iter().map(|c| c.cost).collect(),
@@ -286,19 +293,33 @@ impl<'a> State<'a> {
         let cur = self.sel.cpv_cost[c as usize];
         let new_cost = cur - rep + imp;
         let m = &self.ctx.model;
-        let (t_cur, t_new) = (m.frame_time(cur), m.frame_time(new_cost));
-        // The gain: the time saved, capped by the CPV's excess over the
-        // target. Where times add up, the time saved is computed from the
-        // saving itself, not as a difference of two frame times, so it
-        // does not drift by a rounding step when the CPV's cost changes:
-        // scores then never grow, which the lazy greedy relies on.
-        let saved = m.time_saved(rep - imp).unwrap_or(t_cur - t_new);
         Some(Effect {
-            delta: saved.min(t_cur - self.ctx.t_max).max(0.0),
-            accelerates: t_new < t_cur,
+            accelerates: m.frame_time(new_cost) < m.frame_time(cur),
             new_cost,
             saving: rep - imp,
         })
+    }
+
+    /// `Δt` of replacing cluster `node`, whose objects in CPV `c`'s
+    /// enclosing set cost `orig`, by an impostor costing `imp`, in a CPV
+    /// `excess` above `t_max`: the time saved against the cluster's
+    /// current representation, capped by the excess (0 where an impostor
+    /// of it or an ancestor already represents it). Where times add up,
+    /// the time saved is computed from the saving itself, not as a
+    /// difference of two frame times, so it does not drift by a rounding
+    /// step when the CPV's cost changes: scores then never grow, which the
+    /// lazy greedy relies on.
+    #[inline]
+    fn gain(&self, c: u32, node: u32, orig: Cost, imp: Cost, excess: f64) -> f64 {
+        let Some(rep) = self.representation(c, node, orig) else {
+            return 0.0;
+        };
+        let m = &self.ctx.model;
+        let saved = m.time_saved(rep - imp).unwrap_or_else(|| {
+            let cur = self.sel.cpv_cost[c as usize];
+            m.frame_time(cur) - m.frame_time(cur - rep + imp)
+        });
+        saved.min(excess).max(0.0)
     }
 
     /// Calls `f(cpv, effect)` for every CPV candidate `i` may serve.
@@ -338,11 +359,9 @@ impl<'a> State<'a> {
             }
             let imp = self.ctx.model.impostor(layers, s.radius, gr.dist);
             for (c, orig) in all.pairs.iter(gr) {
-                if self.ctx.model.frame_time(self.sel.cpv_cost[c as usize]) <= self.ctx.t_max {
-                    continue;
-                }
-                if let Some(e) = self.effect(c, node, orig, imp) {
-                    *sum += e.delta;
+                let excess = self.excess[c as usize];
+                if excess > 0.0 {
+                    *sum += self.gain(c, node, orig, imp, excess);
                 }
             }
         }
@@ -395,17 +414,21 @@ impl<'a> State<'a> {
         for (c, cost, _) in changes {
             let cu = c as usize;
             let cpv = &self.pv.cpvs[cu];
+            // Only a cluster adjusted in the CPV has impostors below it there.
+            let below = matches!(self.marks.get(c, node), Mark::Adjusted(_));
             self.marks.cover(c, node, end);
             let imps = &mut self.sel.cpv_impostors[cu];
-            let cands = self.cands;
-            let uses = &mut self.sel.uses;
-            imps.retain(|&j| {
-                let replaced = h.is_descendant(cands[j as usize].node, node);
-                if replaced {
-                    uses[j as usize] -= 1;
-                }
-                !replaced
-            });
+            if below {
+                let cands = self.cands;
+                let uses = &mut self.sel.uses;
+                imps.retain(|&j| {
+                    let replaced = h.is_descendant(cands[j as usize].node, node);
+                    if replaced {
+                        uses[j as usize] -= 1;
+                    }
+                    !replaced
+                });
+            }
             imps.push(i);
             self.sel.uses[i as usize] += 1;
             let m = &self.ctx.model;
@@ -415,6 +438,7 @@ impl<'a> State<'a> {
                 self.unsolved_in_cell[cpv.kd as usize] -= 1;
             }
             self.sel.cpv_cost[cu] = cost;
+            self.excess[cu] = m.frame_time(cost) - self.ctx.t_max;
             self.cell_changed[cpv.kd as usize] = self.sel.accepted + 1;
         }
         self.sel.accepted += 1;
