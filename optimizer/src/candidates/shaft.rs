@@ -267,13 +267,7 @@ mod tests {
 
     #[test]
     fn axis_grids_are_even_and_find_every_axis_near_a_direction() {
-        let mut state = 11u64;
-        let mut next = || {
-            state = state
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            (state >> 11) as f64 / (1u64 << 53) as f64
-        };
+        let mut rng = crate::math::rng::Rng::new(11);
         for (top, spacing) in [
             (2.0, 0.0),
             (2.0, 0.5),
@@ -298,9 +292,9 @@ mod tests {
                     let el = if top < 5.0 {
                         0.0
                     } else {
-                        (next() * 2.0 - 1.0) * PI / 2.0
+                        rng.range(-PI / 2.0, PI / 2.0)
                     };
-                    let az = next() * 2.0 * PI;
+                    let az = rng.range(0.0, 2.0 * PI);
                     let w = DVec3::new(el.cos() * az.cos(), el.sin(), el.cos() * az.sin());
                     let mut found = Vec::new();
                     grid.near(w, alpha, |m, j| found.push((m, j)));
