@@ -17,17 +17,23 @@ use crate::api::job::Job;
 pub struct AxisGrid {
     /// Elevation step between rings.
     step: f64,
-    /// Azimuths on the horizontal ring.
-    n_az: u32,
     /// Highest ring index (0: the horizontal ring only).
     max_el: i32,
+    /// Per ring from `-max_el`: the index of its first axis in `axes`, and
+    /// one past the last ring's.
+    ring_start: Vec<u32>,
+    /// The unit axes, ring by ring.
+    axes: Vec<DVec3>,
 }
 
 impl AxisGrid {
     /// The grid of the job's shafts of half-angle `alpha`.
     pub fn new(job: &Job, alpha: f64) -> Self {
         let cp = &job.candidates;
-        let spacing = (cp.direction_step_deg.to_radians()).max(cp.axis_spacing * alpha);
+        let spacing = cp
+            .direction_step_deg
+            .to_radians()
+            .max(cp.axis_spacing * alpha);
         let n_az = ((2.0 * PI / spacing).round() as u32).max(1);
         let step = 2.0 * PI / f64::from(n_az);
         let height = job.view_space.max[1] - job.view_space.min[1];
@@ -36,30 +42,55 @@ impl AxisGrid {
         } else {
             0
         };
-        AxisGrid { step, n_az, max_el }
+        // Ring `m` has azimuths in proportion to its circumference, one
+        // at a pole; its axes are computed once here, not per test.
+        let mut ring_start = vec![0u32];
+        let mut axes = Vec::new();
+        for m in -max_el..=max_el {
+            let el = Self::ring_elevation(step, m);
+            let n = if el.cos() < 1e-9 {
+                1
+            } else {
+                ((f64::from(n_az) * el.cos()).round() as u32).max(1)
+            };
+            axes.extend((0..n).map(|j| {
+                let az = f64::from(j) * 2.0 * PI / f64::from(n);
+                DVec3::new(el.cos() * az.cos(), el.sin(), el.cos() * az.sin())
+            }));
+            ring_start.push(axes.len() as u32);
+        }
+        AxisGrid {
+            step,
+            max_el,
+            ring_start,
+            axes,
+        }
+    }
+
+    /// Elevation of ring `m` on a grid of elevation step `step`.
+    fn ring_elevation(step: f64, m: i32) -> f64 {
+        (f64::from(m) * step).clamp(-PI / 2.0, PI / 2.0)
     }
 
     /// Elevation of ring `m`.
     fn elevation(&self, m: i32) -> f64 {
-        (f64::from(m) * self.step).clamp(-PI / 2.0, PI / 2.0)
+        Self::ring_elevation(self.step, m)
     }
 
-    /// Azimuths on ring `m`: in proportion to the ring's circumference,
-    /// one at a pole.
+    /// Index in `ring_start` of ring `m`.
+    fn ring_index(&self, m: i32) -> usize {
+        (m + self.max_el) as usize
+    }
+
+    /// Azimuths on ring `m`.
     fn ring(&self, m: i32) -> u32 {
-        let c = self.elevation(m).cos();
-        if c < 1e-9 {
-            1
-        } else {
-            ((f64::from(self.n_az) * c).round() as u32).max(1)
-        }
+        let r = self.ring_index(m);
+        self.ring_start[r + 1] - self.ring_start[r]
     }
 
     /// Unit axis for ring `m` and azimuth index `j`.
     pub fn axis(&self, m: i32, j: u32) -> DVec3 {
-        let el = self.elevation(m);
-        let az = f64::from(j) * 2.0 * PI / f64::from(self.ring(m));
-        DVec3::new(el.cos() * az.cos(), el.sin(), el.cos() * az.sin())
+        self.axes[(self.ring_start[self.ring_index(m)] + j) as usize]
     }
 
     /// Calls `f(m, j)` for every grid axis whose cone of half-angle
@@ -285,7 +316,8 @@ mod tests {
                 // step (32 azimuths by default), or wider for wide shafts.
                 if top < 5.0 {
                     assert_eq!(grid.max_el, 0);
-                    assert_eq!(axes.len() as u32, grid.n_az);
+                    assert_eq!(axes.len() as u32, grid.ring(0));
+                    assert_eq!(grid.ring(0), (2.0 * PI / expected).round() as u32);
                 }
                 assert!((grid.step - expected).abs() < 0.05 * expected);
                 for _ in 0..200 {

@@ -243,11 +243,7 @@ impl<'a> State<'a> {
                 v
             },
             cell_changed: vec![0; pv.kd.len()],
-            excess: pv
-                .cpvs
-                .iter()
-                .map(|c| ctx.model.frame_time(c.cost) - ctx.t_max)
-                .collect(),
+            excess: pv.cpvs.iter().map(|c| c.time - ctx.t_max).collect(),
             sel: Selection {
                 cpv_impostors: vec![Vec::new(); pv.cpvs.len()],
                 cpv_cost: pv.cpvs.iter().map(|c| c.cost).collect(),
@@ -431,14 +427,12 @@ impl<'a> State<'a> {
             }
             imps.push(i);
             self.sel.uses[i as usize] += 1;
-            let m = &self.ctx.model;
-            if m.frame_time(self.sel.cpv_cost[cu]) > self.ctx.t_max
-                && m.frame_time(cost) <= self.ctx.t_max
-            {
+            let excess = self.ctx.model.frame_time(cost) - self.ctx.t_max;
+            if self.excess[cu] > 0.0 && excess <= 0.0 {
                 self.unsolved_in_cell[cpv.kd as usize] -= 1;
             }
             self.sel.cpv_cost[cu] = cost;
-            self.excess[cu] = m.frame_time(cost) - self.ctx.t_max;
+            self.excess[cu] = excess;
             self.cell_changed[cpv.kd as usize] = self.sel.accepted + 1;
         }
         self.sel.accepted += 1;
