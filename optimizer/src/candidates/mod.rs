@@ -38,7 +38,10 @@ mod pairs;
 mod shaft;
 pub use pairs::{Group, Pairs};
 pub use shaft::AxisGrid;
-use shaft::{cone_half_angle, fit_cones, half_angles, ladder_distance, ladder_index};
+use shaft::{
+    cone_half_angle, distinct_corners, fit_cones, half_angles, ladder_distance, ladder_index,
+    min_cos,
+};
 
 /// One impostor candidate.
 #[derive(Clone, Debug)]
@@ -188,13 +191,15 @@ pub fn generate(ctx: &Context, job: &Job, pv: &ProblemViews) -> Candidates {
                 return (Vec::new(), Vec::new());
             }
             let sphere = h.nodes[n as usize].sphere;
-            // Directions of each group's cell corners from the cluster.
-            let corner_dirs: Vec<[DVec3; 8]> = (g0..g1)
-                .map(|g| {
-                    let region = pv.cpvs[pairs.first_cpv(pairs.group(g)) as usize].region;
-                    region.corners().map(|p| (p - sphere.center).normalize())
-                })
-                .collect();
+            // Directions of the cells' corners from the cluster, each
+            // distinct corner once (neighbouring cells share corners, which
+            // the grid computes bit for bit alike), and each group's eight.
+            let (corner_dirs, corner_ids) = distinct_corners(
+                (g0..g1).map(|g| pv.cpvs[pairs.first_cpv(pairs.group(g)) as usize].region),
+                sphere.center,
+            );
+            let mut seen = vec![u32::MAX; corner_dirs.len()];
+            let mut block_no = 0u32;
             let size = 2.0 * sphere.radius;
             // (key, group) for every cell inside the key's view cell.
             let mut tuples: Vec<(Key, u32)> = Vec::new();
@@ -214,7 +219,8 @@ pub fn generate(ctx: &Context, job: &Job, pv: &ProblemViews) -> Candidates {
                 if shafts && size > 0.0 && dist >= size {
                     let k = ladder_index(size, dist, steps, last_k);
                     let d_k = ladder_distance(size, k, steps);
-                    let corners = &corner_dirs[(g - g0) as usize];
+                    let corners = corner_ids[(g - g0) as usize].map(|c| corner_dirs[c as usize]);
+                    let corners = &corners;
                     let w = (region.center() - sphere.center).normalize();
                     for (ai, &alpha) in alphas.iter().enumerate() {
                         let Some(spec) = imodel.shaft(&sphere, alpha, d_k) else {
@@ -327,20 +333,36 @@ pub fn generate(ctx: &Context, job: &Job, pv: &ProblemViews) -> Candidates {
                     }
                 }
                 // Shafts: the directions of the served cells' corners from
-                // the cluster, eight per cell in block order, and the
-                // smallest cone around each candidate's prefix.
-                let (dirs, fits) = match tuples[i].0 {
+                // the cluster in block order, each distinct corner where it
+                // first appears (so every prefix of cells has its corners in
+                // a prefix), and the smallest cone around each candidate's.
+                // `corner_end[t - i]`: the corners of the first `t - i` cells.
+                let (dirs, corner_end, fits) = match tuples[i].0 {
                     Key::Shaft { .. } => {
-                        let mut dirs: Vec<DVec3> = tuples[i..e]
-                            .iter()
-                            .flat_map(|&(_, g)| corner_dirs[(g - g0) as usize])
-                            .collect();
-                        let corner_ends: Vec<usize> = ends.iter().map(|&t| 8 * (t - i)).collect();
-                        let fits = fit_cones(&mut dirs, &corner_ends);
-                        (dirs, fits)
+                        block_no += 1;
+                        let mut dirs: Vec<DVec3> = Vec::with_capacity(8 * (e - i));
+                        let mut corner_end = Vec::with_capacity(e - i + 1);
+                        corner_end.push(0);
+                        for &(_, g) in &tuples[i..e] {
+                            for id in corner_ids[(g - g0) as usize] {
+                                if seen[id as usize] != block_no {
+                                    seen[id as usize] = block_no;
+                                    dirs.push(corner_dirs[id as usize]);
+                                }
+                            }
+                            corner_end.push(dirs.len());
+                        }
+                        let prefix_ends: Vec<usize> =
+                            ends.iter().map(|&t| corner_end[t - i]).collect();
+                        let fits = fit_cones(&mut dirs, &prefix_ends);
+                        (dirs, corner_end, fits)
                     }
-                    Key::Box { .. } => (Vec::new(), Vec::new()),
+                    Key::Box { .. } => (Vec::new(), Vec::new(), Vec::new()),
                 };
+                // The last fitted axis and the smallest cosine of its prefix's
+                // corners to it: a prefix whose fit keeps the axis is measured
+                // on its new corners only.
+                let mut measured: Option<(DVec3, usize, f64)> = None;
                 let first_in_block = cands.len();
                 let mut nearest = f64::INFINITY;
                 let mut grid_widest = 0.0f64;
@@ -363,11 +385,20 @@ pub fn generate(ctx: &Context, job: &Job, pv: &ProblemViews) -> Candidates {
                             // around the served cells' corners (convex, so
                             // it contains the cells), measured exactly; the
                             // grid axis stands in should the fit fail.
-                            let corners = &dirs[..8 * (t - i)];
-                            grid_widest = grid_widest
-                                .max(cone_half_angle(&dirs[8 * (s - i)..8 * (t - i)], grid_axis));
+                            let (from, to) = (corner_end[s - i], corner_end[t - i]);
+                            grid_widest =
+                                grid_widest.max(cone_half_angle(&dirs[from..to], grid_axis));
                             let (axis, widest) = fits[c]
-                                .map(|a| (a, cone_half_angle(corners, a)))
+                                .map(|a| {
+                                    let min_cos = match measured {
+                                        Some((b, len, m)) if b == a => {
+                                            min_cos(&dirs[len..to], a).min(m)
+                                        }
+                                        _ => min_cos(&dirs[..to], a),
+                                    };
+                                    measured = Some((a, to, min_cos));
+                                    (a, min_cos.clamp(-1.0, 1.0).acos())
+                                })
                                 .filter(|fit| fit.1 < grid_widest)
                                 .unwrap_or((grid_axis, grid_widest));
                             let alpha = alpha.min(widest * (1.0 + 1e-9) + 1e-12);

@@ -7,6 +7,7 @@ use std::f64::consts::PI;
 use glam::DVec3;
 
 use crate::api::job::Job;
+use crate::math::geom::Aabb;
 
 /// Axis grid of the shafts of one half-angle: rings of elevation (only the
 /// horizontal one when the view space is flat, under half a cell high),
@@ -171,11 +172,37 @@ pub(super) fn half_angles(job: &Job) -> Vec<f64> {
 /// Half-angle of the cone around `axis` containing the unit directions
 /// `dirs`.
 pub(super) fn cone_half_angle(dirs: &[DVec3], axis: DVec3) -> f64 {
-    dirs.iter()
-        .map(|w| w.dot(axis))
-        .fold(1.0, f64::min)
-        .clamp(-1.0, 1.0)
-        .acos()
+    min_cos(dirs, axis).clamp(-1.0, 1.0).acos()
+}
+
+/// The smallest cosine between `axis` and the unit directions `dirs` (1 for
+/// none): [`cone_half_angle`] before the arccosine, so that it can be
+/// taken over a prefix in parts.
+pub(super) fn min_cos(dirs: &[DVec3], axis: DVec3) -> f64 {
+    dirs.iter().map(|w| w.dot(axis)).fold(1.0, f64::min)
+}
+
+/// The directions from `apex` to the distinct corners of `regions`, and
+/// each region's eight corners as indices into them. Corners are the same
+/// when their coordinates are, bit for bit.
+pub(super) fn distinct_corners(
+    regions: impl Iterator<Item = Aabb>,
+    apex: DVec3,
+) -> (Vec<DVec3>, Vec<[u32; 8]>) {
+    let corners: Vec<[DVec3; 8]> = regions.map(|r| r.corners()).collect();
+    let bits = |p: DVec3| [p.x.to_bits(), p.y.to_bits(), p.z.to_bits()];
+    let mut order: Vec<u32> = (0..8 * corners.len() as u32).collect();
+    let at = |i: u32| corners[i as usize / 8][i as usize % 8];
+    order.sort_unstable_by_key(|&i| (bits(at(i)), i));
+    let mut ids = vec![[0u32; 8]; corners.len()];
+    let mut dirs: Vec<DVec3> = Vec::new();
+    for (n, &i) in order.iter().enumerate() {
+        if n == 0 || bits(at(order[n - 1])) != bits(at(i)) {
+            dirs.push((at(i) - apex).normalize());
+        }
+        ids[i as usize / 8][i as usize % 8] = dirs.len() as u32 - 1;
+    }
+    (dirs, ids)
 }
 
 /// Axes of the smallest cones around prefixes of unit directions `dirs`:
@@ -294,6 +321,33 @@ mod tests {
         (-grid.max_el..=grid.max_el)
             .flat_map(|m| (0..grid.ring(m)).map(move |j| (m, j)))
             .collect()
+    }
+
+    #[test]
+    fn distinct_corners_are_shared_between_neighbouring_cells() {
+        // A 3 x 2 x 1 row of grid cells: 4 x 3 x 2 distinct corners.
+        let (lo, hi) = (DVec3::new(0.3, 1.5, 0.7), DVec3::new(70.1, 5.0, 47.3));
+        let grid = crate::math::grid::Grid::new(lo, hi, 23.3);
+        let cells: Vec<Aabb> = (0..3)
+            .flat_map(|x| (0..2).map(move |z| (x, z)))
+            .map(|(x, z)| grid.cell_box([x, 0, z], [x + 1, 1, z + 1]))
+            .collect();
+        let apex = DVec3::new(30.0, 100.0, -40.0);
+        let (dirs, ids) = distinct_corners(cells.iter().copied(), apex);
+        assert_eq!(dirs.len(), 24);
+        for (cell, ids) in cells.iter().zip(&ids) {
+            for (p, &id) in cell.corners().iter().zip(ids) {
+                assert_eq!(dirs[id as usize], (*p - apex).normalize());
+            }
+        }
+        let mut used: Vec<u32> = ids.iter().flatten().copied().collect();
+        used.sort_unstable();
+        used.dedup();
+        assert_eq!(
+            used.len(),
+            dirs.len(),
+            "every direction belongs to a corner"
+        );
     }
 
     #[test]
