@@ -155,10 +155,7 @@ pub fn sample_report() -> crate::report::Report {
             memory_bytes: mem,
             unsolved_cpvs: 0,
             seconds: s,
-            stage_seconds: vec![StageTime {
-                stage: "greedy".into(),
-                seconds: s / 2.0,
-            }],
+            stage_seconds: vec![StageTime::new("greedy", s / 2.0)],
             eval: Some(EvalSummary {
                 views: 1000,
                 max_ms: t * if over == 1 { 1.08 } else { k },

@@ -100,13 +100,35 @@ pub struct LodStats {
     pub generated: Option<LodReport>,
 }
 
-/// Wall time of one stage.
+/// Wall time of one stage and, for the placement's stages, the process's
+/// resident memory when it ended.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
 pub struct StageTime {
     /// Stage name.
     pub stage: String,
     /// Seconds.
     pub seconds: f64,
+    /// Resident memory of the process when the stage ended (`VmRSS`), bytes;
+    /// absent where not measured.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub rss_bytes: Option<u64>,
+    /// Peak resident memory of the process up to the stage's end (`VmHWM`),
+    /// bytes: the stage whose value first reaches the run's peak is where
+    /// the peak happened. Absent where not measured.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub peak_rss_bytes: Option<u64>,
+}
+
+impl StageTime {
+    /// A stage's time without memory figures.
+    pub fn new(stage: &str, seconds: f64) -> Self {
+        StageTime {
+            stage: stage.into(),
+            seconds,
+            rss_bytes: None,
+            peak_rss_bytes: None,
+        }
+    }
 }
 
 /// Visibility counters (`stats.visibility`).

@@ -523,6 +523,7 @@ pub fn select_lazy(
             )
         })
         .collect();
+    let mut compact_at = 2 * heap.len().max(1024);
     let batch = LAZY_BATCH;
     let mut version = 0u64;
     let mut stale: Vec<u32> = Vec::with_capacity(batch);
@@ -571,6 +572,14 @@ pub fn select_lazy(
                     heap.push((Key { score, id }, version));
                 }
             }
+        }
+        // Outdated keys are dropped when popped; should they make up half
+        // the heap, they go at once (the pop order of the others does not
+        // change: keys are totally ordered), so the heap stays within about
+        // twice the candidates it ranks.
+        if heap.len() > compact_at {
+            heap.retain(|&(k, s)| s >= latest[k.id as usize]);
+            compact_at = compact_at.max(2 * heap.len());
         }
     }
     st.sel

@@ -190,10 +190,7 @@ impl SceneInput {
     ) -> Result<SceneInput> {
         let mut seconds = Vec::new();
         let mut timed = |stage: &str, start: Instant| {
-            seconds.push(StageTime {
-                stage: stage.into(),
-                seconds: start.elapsed().as_secs_f64(),
-            })
+            seconds.push(StageTime::new(stage, start.elapsed().as_secs_f64()))
         };
         if let Some(g) = &geometry
             && g.object_count() != scene.objects.len()

@@ -38,10 +38,10 @@ impl<'a> Prepared<'a> {
         .map(Arc::new);
         let mut seconds = input.seconds.clone();
         if visibility.is_some() {
-            seconds.push(StageTime {
-                stage: "visibility_setup".into(),
-                seconds: start.elapsed().as_secs_f64(),
-            });
+            seconds.push(StageTime::new(
+                "visibility_setup",
+                start.elapsed().as_secs_f64(),
+            ));
         }
         Ok(Prepared {
             input,

@@ -61,9 +61,11 @@ impl<'c> Stages<'c> {
     fn end(&mut self, stage: &str) {
         let seconds = self.start.elapsed().as_secs_f64();
         self.ctl.stage_done(stage, seconds);
+        let known = |b: u64| (b > 0).then_some(b);
         self.times.push(StageTime {
-            stage: stage.into(),
-            seconds,
+            rss_bytes: known(current_rss_bytes()),
+            peak_rss_bytes: known(peak_rss_bytes()),
+            ..StageTime::new(stage, seconds)
         });
     }
 }
@@ -435,6 +437,31 @@ mod tests {
             ..PlaceOptions::default()
         };
         assert!(try_place(&scene, &job, &opts, &Control::default()).is_ok());
+    }
+
+    #[test]
+    fn placement_stages_record_resident_memory() {
+        let scene = synthetic_city(1, 5, 5);
+        let job = synthetic_job(5, 5);
+        let out = try_place(&scene, &job, &PlaceOptions::default(), &Control::default()).unwrap();
+        let stages: Vec<&StageTime> = out
+            .stats
+            .seconds
+            .iter()
+            .filter(|t| ["problem_views", "candidates", "greedy"].contains(&t.stage.as_str()))
+            .collect();
+        assert_eq!(stages.len(), 3, "{:?}", out.stats.seconds);
+        if current_rss_bytes() == 0 {
+            return; // no /proc here
+        }
+        let mut last = 0;
+        for t in stages {
+            let (rss, peak) = (t.rss_bytes.unwrap(), t.peak_rss_bytes.unwrap());
+            assert!(rss > 0 && rss <= peak, "{t:?}");
+            assert!(peak >= last, "the peak never falls: {t:?}");
+            assert!(peak <= out.stats.peak_rss_bytes, "{t:?}");
+            last = peak;
+        }
     }
 
     #[test]
