@@ -493,6 +493,20 @@ pub fn select_lazy(
     cands: &Candidates,
     progress: &mut dyn FnMut(u64) -> bool,
 ) -> Selection {
+    select_lazy_with(ctx, pv, cands, progress, None)
+}
+
+/// [`select_lazy`] removing outdated heap keys first when the heap holds
+/// more than `first_compaction` keys (default: twice the initial keys, at
+/// least 2,048), then whenever it doubles. Tests lower it so that the
+/// removal runs on small inputs; the selection is the same either way.
+pub(crate) fn select_lazy_with(
+    ctx: &Context,
+    pv: &ProblemViews,
+    cands: &Candidates,
+    progress: &mut dyn FnMut(u64) -> bool,
+    first_compaction: Option<usize>,
+) -> Selection {
     let mut st = State::new(ctx, pv, cands);
     if !progress(st.unsolved()) {
         return st.sel;
@@ -523,7 +537,7 @@ pub fn select_lazy(
             )
         })
         .collect();
-    let mut compact_at = 2 * heap.len().max(1024);
+    let mut compact_at = first_compaction.unwrap_or(2 * heap.len().max(1024));
     let batch = LAZY_BATCH;
     let mut version = 0u64;
     let mut stale: Vec<u32> = Vec::with_capacity(batch);
