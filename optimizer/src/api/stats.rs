@@ -57,8 +57,12 @@ pub struct Stats {
     pub candidates: u64,
     /// Greedy choices.
     pub greedy_choices: u64,
-    /// Score evaluations.
+    /// Score evaluations: candidates whose exact score the greedy computed.
     pub score_evaluations: u64,
+    /// Score bounds: candidates whose score the greedy bounded from the
+    /// cells' summed excess before computing it (cheaper: no pair walked).
+    #[serde(default)]
+    pub score_bounds: u64,
     /// Impostors removed by pruning.
     pub pruned: u64,
     /// Impostors placed.

@@ -231,6 +231,13 @@ impl CostModel {
     /// at `distance`: one draw call, two triangles per layer, and every layer
     /// rasterises the cluster's projected area (`c_call + c_tri·2n + c_pix·n·area`).
     pub fn impostor(&self, layers: u32, radius: f64, distance: f64) -> Cost {
+        self.impostor_covering(layers, self.pixels(radius, distance))
+    }
+
+    /// Cost of an impostor of `layers` layers, each rasterising `pixels`
+    /// (its sphere's [`pixels`](Self::pixels)): [`impostor`](Self::impostor)
+    /// with the projection computed once for several layer counts.
+    pub fn impostor_covering(&self, layers: u32, pixels: f64) -> Cost {
         let n = f64::from(layers);
         match self.combine {
             Combine::Primitives => Cost {
@@ -239,7 +246,7 @@ impl CostModel {
             },
             _ => Cost {
                 cpu: self.call_ms,
-                gpu: self.tri_ms * 2.0 * n + self.pix_ms * n * self.pixels(radius, distance),
+                gpu: self.tri_ms * 2.0 * n + self.pix_ms * n * pixels,
             },
         }
     }

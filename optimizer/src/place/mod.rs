@@ -169,6 +169,7 @@ impl Prepared<'_> {
             candidates: cands.list.len() as u64,
             greedy_choices: sel.accepted,
             score_evaluations: sel.evaluations,
+            score_bounds: sel.bounds,
             evaluations_per_choice: sel.evaluations as f64 / sel.accepted.max(1) as f64,
             predicted_peak_bytes: predicted,
             pruned: sel.pruned,
