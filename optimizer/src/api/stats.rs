@@ -30,11 +30,13 @@ pub struct Stats {
     /// not CPVs.
     #[serde(default)]
     pub cpvs_refined_away: u64,
-    /// Share of CPVs in which some sampled exact view (no impostor) exceeds
-    /// the target: 1 when every CPV is a real problem view, near 0 when the
+    /// Share of CPVs in which some exact view (no impostor) exceeds the
+    /// target: 1 when every CPV is a real problem view, near 0 when the
     /// estimate finds problems no view has (absent without CPVs). Measured
-    /// on `cpv_precision_sampled` CPVs spread over the list, 32 views each;
-    /// sampling may miss a CPV's slowest view, so it is a lower bound.
+    /// on `cpv_precision_sampled` CPVs spread over the list, each searched
+    /// for its slowest view (32 uniform views, the 32 extreme views of its
+    /// region and directions, then a local search from the slowest); a
+    /// search may miss a CPV's slowest view, so it is a lower bound.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub cpv_precision: Option<f64>,
     /// CPVs sampled for `cpv_precision`.

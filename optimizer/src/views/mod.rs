@@ -19,7 +19,7 @@ mod precision;
 pub use approximate::approximate;
 pub use context::{Context, Counters};
 pub use costs::{RegionCosts, cpv_clusters, enclosed_cost, enclosing_time, exceeds_target};
-pub use precision::{cpv_precision, exact_view_time, slowest_sampled_view};
+pub use precision::{cpv_precision, exact_view_time, slowest_sampled_view, slowest_view_search};
 
 use crate::math::geom::{Aabb, Vdi};
 use crate::math::grid::Grid;
@@ -320,7 +320,7 @@ mod tests {
                 continue;
             }
             dropped += 1;
-            let worst = slowest_sampled_view(&ctx, &coarse, c, 64, i as u64);
+            let worst = slowest_view_search(&ctx, &coarse, c, f64::INFINITY, i as u64);
             assert!(
                 worst <= job.target_frame_time_ms,
                 "a dropped problem view has an exact view of {worst} ms"
@@ -334,6 +334,33 @@ mod tests {
             "every coarse CPV is real: nothing to refine"
         );
         assert!(p_fine >= p_coarse, "{p_fine} < {p_coarse}");
+    }
+
+    /// The search for a CPV's slowest view finds at least what uniform
+    /// samples find, never more than the conservative estimate, and in some
+    /// CPVs a slower view than the samples.
+    #[test]
+    fn search_finds_slower_views_than_samples() {
+        let scene = crate::testutil::synthetic_city(5, 6, 6);
+        let mut job = crate::testutil::synthetic_job(6, 6);
+        job.problem_views.refine_levels = 0;
+        let h = Hierarchy::build(&scene);
+        let ctx = Context::new(&scene, &h, None, &job, Control::default());
+        let pv = approximate(&ctx, &job, &Counters::new());
+        assert!(pv.cpvs.len() > 20);
+        let mut slower = 0;
+        for (i, c) in pv.cpvs.iter().enumerate().step_by(3) {
+            let sampled = slowest_sampled_view(&ctx, &pv, c, precision::PRECISION_VIEWS, i as u64);
+            let searched = slowest_view_search(&ctx, &pv, c, f64::INFINITY, i as u64);
+            assert!(sampled <= searched, "CPV {i}: {searched} < {sampled}");
+            assert!(
+                searched <= c.time + 1e-9,
+                "CPV {i}: {searched} above its estimate {}",
+                c.time
+            );
+            slower += usize::from(searched > sampled + 1e-6);
+        }
+        assert!(slower > 0, "the search never beat the samples");
     }
 
     /// The precision is 0 when no view can exceed the target and 1 when
