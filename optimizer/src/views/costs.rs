@@ -77,6 +77,9 @@ fn leaf_cost(ctx: &Context, costs: &RegionCosts, cone: &Enclosing, n: u32, mask:
     let h = ctx.hierarchy;
     let mut c = Cost::default();
     for &o in h.objects(n) {
+        if costs.objects[o as usize] == Cost::default() {
+            continue;
+        }
         let s = &h.object_spheres[o as usize];
         if cone.classify_within(s.center, s.radius, mask).0 != Overlap::Outside {
             c += costs.objects[o as usize];
@@ -104,6 +107,11 @@ pub fn enclosed_cost(
         emit: &mut Option<&mut Vec<(u32, Cost)>>,
     ) -> Cost {
         let h = ctx.hierarchy;
+        // A cluster with nothing to draw from the region (culled by
+        // visibility) adds nothing and lists nothing below it.
+        if costs.nodes[n as usize] == Cost::default() {
+            return Cost::default();
+        }
         let node = &h.nodes[n as usize];
         let s = node.sphere;
         let (overlap, left) = cone.classify_within(s.center, s.radius, mask);
@@ -151,6 +159,9 @@ pub fn exceeds_target(ctx: &Context, costs: &RegionCosts, cone: &Enclosing) -> b
     let mut sum = Cost::default();
     let mut stack = vec![(0u32, cone.all_bounds())];
     while let Some((n, mask)) = stack.pop() {
+        if costs.nodes[n as usize] == Cost::default() {
+            continue;
+        }
         let node = &h.nodes[n as usize];
         let s = node.sphere;
         match cone.classify_within(s.center, s.radius, mask) {
