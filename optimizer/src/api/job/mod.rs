@@ -369,7 +369,7 @@ pub struct CandidateParams {
     /// wholly; spacing them in proportion to their width keeps the choice of
     /// which cells a shaft serves while listing each cell under fewer
     /// shafts. 0 puts every angle on the `direction_step_deg` grid.
-    /// Default 0.5.
+    /// Default 0.75.
     #[serde(default = "default_axis_spacing")]
     pub axis_spacing: f64,
     /// Shaft minimum distances range from `size` to `size · 2^doublings`, with
@@ -449,7 +449,7 @@ fn default_dir_step() -> f64 {
     11.25
 }
 fn default_axis_spacing() -> f64 {
-    0.5
+    0.75
 }
 fn default_doublings() -> u32 {
     10
