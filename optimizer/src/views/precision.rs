@@ -67,8 +67,8 @@ pub fn slowest_sampled_view(
 
 /// Moves of the local search in [`slowest_view_search`]: step sizes as
 /// fractions of each coordinate's range, and moves per step size.
-const SEARCH_STEPS: [f64; 3] = [0.25, 0.08, 0.02];
-const SEARCH_MOVES: usize = 4;
+const SEARCH_STEPS: [f64; 2] = [0.25, 0.06];
+const SEARCH_MOVES: usize = 2;
 
 /// Searches `cpv` for its slowest exact view, stopping as soon as one is
 /// slower than `stop_above`: the [`PRECISION_VIEWS`] uniform views of
