@@ -203,6 +203,8 @@ pub fn generate(ctx: &Context, job: &Job, pv: &ProblemViews) -> Candidates {
             let size = 2.0 * sphere.radius;
             // (key, group) for every cell inside the key's view cell.
             let mut tuples: Vec<(Key, u32)> = Vec::new();
+            let mut grid_specs: Vec<Option<Option<ImpostorSpec>>> =
+                vec![None; alphas.len() * (last_k as usize + 1)];
             for g in g0..g1 {
                 let gr = pairs.group(g);
                 let first = &pv.cpvs[pairs.first_cpv(gr) as usize];
@@ -223,7 +225,12 @@ pub fn generate(ctx: &Context, job: &Job, pv: &ProblemViews) -> Candidates {
                     let corners = &corners;
                     let w = (region.center() - sphere.center).normalize();
                     for (ai, &alpha) in alphas.iter().enumerate() {
-                        let Some(spec) = imodel.shaft(&sphere, alpha, d_k) else {
+                        // The grid shaft's impostor, once per cluster, angle
+                        // and distance step.
+                        let slot = &mut grid_specs[ai * (last_k as usize + 1) + k as usize];
+                        let Some(spec) =
+                            *slot.get_or_insert_with(|| imodel.shaft(&sphere, alpha, d_k))
+                        else {
                             continue;
                         };
                         if !helps(&spec) {

