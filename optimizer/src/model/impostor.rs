@@ -279,7 +279,7 @@ impl ImpostorModel {
 
     /// The layer count of [`shaft`](Self::shaft).
     pub fn shaft_layers(&self, r: f64, alpha: f64, d: f64) -> Option<u32> {
-        if !(d > r) || !alpha.is_finite() {
+        if d.partial_cmp(&r) != Some(std::cmp::Ordering::Greater) || !alpha.is_finite() {
             return None;
         }
         let sin_b = r / d;
