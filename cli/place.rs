@@ -76,6 +76,26 @@ pub fn run(a: PlaceArgs) -> Result<ExitCode> {
         sum.memory_bytes as f64 / 1e6,
         sum.unsolved_cpvs
     );
+    if sum.unsolved_cpvs > 0 {
+        let reasons: Vec<String> = sum
+            .unsolved_by_reason
+            .iter()
+            .map(|(r, n)| format!("{n} {}", r.as_str()))
+            .collect();
+        eprintln!(
+            "unsolved CPVs up to {:.3} ms above the target{}{}",
+            sum.max_residual_ms,
+            if reasons.is_empty() { "" } else { ": " },
+            reasons.join(", ")
+        );
+    }
+    if let Some(b) = sum.budget_bytes {
+        eprintln!(
+            "memory budget {:.3} MB, {:.1} % used",
+            b as f64 / 1e6,
+            100.0 * sum.memory_bytes as f64 / (b.max(1) as f64)
+        );
+    }
     if let Some(p) = output.stats.cpv_precision {
         eprintln!(
             "{} problem views proven by refinement; {:.0} % of {} sampled CPVs have an exact view above the target{}",

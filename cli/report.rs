@@ -31,6 +31,11 @@ pub struct ReportArgs {
     /// and shuffle the objects, and report each method's spread.
     #[arg(long)]
     stability: bool,
+    /// Memory budgets as fractions of each method's unbudgeted memory,
+    /// comma-separated, e.g. `0.5,0.25,0.1`: each runs after the method's
+    /// base run and is charted as frame time against memory.
+    #[arg(long, value_delimiter = ',')]
+    budgets: Vec<f64>,
     /// Views per evaluation.
     #[arg(long, default_value_t = 4000)]
     views: u64,
@@ -55,6 +60,7 @@ pub fn run(a: ReportArgs) -> Result<ExitCode> {
         .iter()
         .map(|s| report::run::parse_sweep(s))
         .collect::<Result<Vec<_>>>()?;
+    let budgets = report::run::parse_budgets(&a.budgets)?;
     let input = a.input.load(&parsed, GeometryUse::WhenNeeded)?;
     std::fs::create_dir_all(&a.out).map_err(|e| Error::io(&a.out, e))?;
     let name = a
@@ -73,6 +79,7 @@ pub fn run(a: ReportArgs) -> Result<ExitCode> {
             methods,
             sweeps,
             stability: a.stability,
+            budgets,
             views: a.views,
         },
         &Control::observed(&observer),

@@ -61,6 +61,62 @@ fn a_report_compares_methods_over_a_target_sweep() {
     assert_eq!(csv.lines().count(), 1 + runs.len());
 }
 
+/// `--budgets`: each method's placement under fractions of its own
+/// unbudgeted memory stays within the budget, keeps the guarantee where it
+/// claims it, and shows up in the budget chart.
+#[test]
+fn a_report_charts_frame_time_under_memory_budgets() {
+    let dir = tmp("report-budgets");
+    let city = city("0.1");
+    let out = dir.join("r");
+    let o = run(&[
+        "report",
+        s(&city),
+        "--job",
+        s(&small_job()),
+        "--methods",
+        "shafts",
+        "--budgets",
+        "0.5,0.1",
+        "--views",
+        "800",
+        "-o",
+        s(&out),
+    ]);
+    assert_eq!(code(&o), 0, "{}", stderr(&o));
+    let r = read_json(&out.join("report.json"));
+    let runs = r["runs"].as_array().unwrap();
+    assert_eq!(runs.len(), 3, "base + 2 budgets");
+    let free = runs[0]["memory_bytes"].as_u64().unwrap();
+    assert!(free > 0);
+    let mut unsolved = runs[0]["unsolved_cpvs"].as_u64().unwrap();
+    for (run, f) in runs[1..].iter().zip([0.5, 0.1]) {
+        assert_eq!(run["knob"], "memory.budget_bytes", "{run}");
+        let budget = run["budget_bytes"].as_u64().unwrap();
+        assert_eq!(budget, (free as f64 * f).floor() as u64);
+        assert!(run["memory_bytes"].as_u64().unwrap() <= budget, "{run}");
+        assert_eq!(run["eval"]["violations_in_solved"], 0, "{run}");
+        let u = run["unsolved_cpvs"].as_u64().unwrap();
+        assert!(u > unsolved, "{run}");
+        unsolved = u;
+        assert!(run["max_residual_ms"].as_f64().unwrap() > 0.0, "{run}");
+    }
+    let html = std::fs::read_to_string(out.join("report.html")).unwrap();
+    assert!(html.contains("id=\"chart-budget\""));
+    let o = run(&[
+        "report",
+        s(&city),
+        "--job",
+        s(&small_job()),
+        "--budgets",
+        "1.5",
+        "-o",
+        s(&out),
+    ]);
+    assert_eq!(code(&o), 2, "{}", stderr(&o));
+    assert!(stderr(&o).contains("--budgets"), "{}", stderr(&o));
+}
+
 #[test]
 fn the_stability_mode_reports_each_methods_spread() {
     let dir = tmp("stability");
@@ -134,6 +190,35 @@ fn the_failure_scene_leaves_problem_views_unsolved_for_every_method() {
                 .iter()
                 .any(|c| c["solved"] == false && c["time_ms_final"].as_f64().unwrap() > 5.0)
         );
+        // Every unsolved one says why; most, as the scene was built for,
+        // because what they draw is too close for any impostor within the
+        // image budget (shafts: nearer than their diameter; boxes: too
+        // many layers).
+        if m != "env-map" {
+            let unsolved: Vec<&serde_json::Value> = placement["cpvs"]
+                .as_array()
+                .unwrap()
+                .iter()
+                .filter(|c| c["solved"] == false)
+                .collect();
+            assert!(unsolved.iter().all(|c| c["unsolved_reason"].is_string()));
+            let by_reason = &placement["summary"]["unsolved_by_reason"];
+            let mut close = 0;
+            for r in ["cluster_contains_region", "no_candidate_meets_max_error_px"] {
+                let n = unsolved
+                    .iter()
+                    .filter(|c| c["unsolved_reason"] == r)
+                    .count();
+                assert_eq!(by_reason[r].as_u64().unwrap_or(0), n as u64, "{m}: {r}");
+                close += n;
+            }
+            assert!(
+                close > unsolved.len() / 2,
+                "{m}: {close} of {}",
+                unsolved.len()
+            );
+            assert!(placement["summary"]["max_residual_ms"].as_f64().unwrap() > 5.0);
+        }
         // The problem views it solved are clean, where the same views
         // without impostors are not (env-map solves none it could break).
         let eval = if m == "env-map" {
@@ -150,6 +235,36 @@ fn the_failure_scene_leaves_problem_views_unsolved_for_every_method() {
             "{m}: the failure must show"
         );
     }
+}
+
+/// A memory budget of 0 places nothing: every problem view is reported
+/// unsolved, for the budget where an impostor would have helped, exit 3.
+#[test]
+fn a_zero_memory_budget_places_nothing_with_exit_3() {
+    let dir = tmp("budget-zero");
+    let scene = dir.join("failure.glb");
+    let o = run(&["gen-city", "--failure", "-o", s(&scene)]);
+    assert_eq!(code(&o), 0, "{}", stderr(&o));
+    let mut job = read_json(&root().join("fixtures/jobs/failure.json"));
+    job["memory"] = serde_json::json!({ "budget_bytes": 0 });
+    let job_path = dir.join("job.json");
+    std::fs::write(&job_path, job.to_string()).unwrap();
+    let p = dir.join("p.json");
+    let o = place(&scene, &job_path, &p, &[]);
+    assert_eq!(code(&o), 3, "{}", stderr(&o));
+    assert!(stderr(&o).contains("budget_exhausted"), "{}", stderr(&o));
+    let placement = read_json(&p);
+    let sum = &placement["summary"];
+    assert_eq!(sum["impostors"], 0);
+    assert_eq!(sum["memory_bytes"], 0);
+    assert_eq!(sum["budget_bytes"], 0);
+    assert_eq!(sum["unsolved_cpvs"], sum["cpvs"]);
+    assert!(
+        sum["unsolved_by_reason"]["budget_exhausted"]
+            .as_u64()
+            .unwrap()
+            > 0
+    );
 }
 
 #[test]

@@ -154,6 +154,8 @@ pub fn sample_report() -> crate::report::Report {
             impostors: mem / 100_000,
             memory_bytes: mem,
             unsolved_cpvs: 0,
+            max_residual_ms: 0.0,
+            budget_bytes: None,
             seconds: s,
             stage_seconds: vec![StageTime::new("greedy", s / 2.0)],
             eval: Some(EvalSummary {
@@ -213,6 +215,27 @@ pub fn sample_report() -> crate::report::Report {
                 s,
             ));
         }
+    }
+    // Shafts under budgets of a half and a quarter of their 3 MB at 20 ms.
+    for (f, max) in [(0.5, 26.0), (0.25, 33.0)] {
+        let budget = (3_000_000.0 * f) as u64;
+        let mut r = run(
+            "shafts",
+            Some("memory.budget_bytes"),
+            Some(budget as f64),
+            20.0,
+            budget - 20_000,
+            0.6,
+        );
+        r.budget_bytes = Some(budget);
+        r.unsolved_cpvs = (40.0 / f) as u64;
+        r.max_residual_ms = max - 20.0 + 1.0;
+        if let Some(e) = &mut r.eval {
+            e.max_ms = max;
+            e.p99_ms = 0.8 * max;
+            e.violations = 50;
+        }
+        runs.push(r);
     }
     let walk = |method: &str, t: f64, bump: bool| Walkthrough {
         method: method.into(),
@@ -295,6 +318,7 @@ pub fn sample_report() -> crate::report::Report {
                 values: vec![2.0, 4.0, 8.0],
             },
         ],
+        budgets: vec![0.5, 0.25],
         runs,
         walkthroughs: vec![
             walk("shafts", 10.0, false),

@@ -2,6 +2,8 @@
 //! (`schemas/placement.schema.json`). Deterministic and diffable; timings and
 //! counters go to [`Stats`] only.
 
+use std::collections::BTreeMap;
+
 use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 
@@ -33,6 +35,52 @@ pub struct Summary {
     pub unsolved_cpvs: u64,
     /// The target frame time the placement was made for, ms.
     pub target_frame_time_ms: f64,
+    /// The largest estimated time of an unsolved CPV above the target, ms
+    /// (0 when every CPV is solved).
+    #[serde(default)]
+    pub max_residual_ms: f64,
+    /// Unsolved CPVs by the reason they could not be solved.
+    #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
+    pub unsolved_by_reason: BTreeMap<UnsolvedReason, u64>,
+    /// The job's impostor memory budget, bytes, if it set one.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub budget_bytes: Option<u64>,
+}
+
+/// Why a CPV is still above the target after the placement.
+#[derive(
+    Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash, Serialize, Deserialize, JsonSchema,
+)]
+#[serde(rename_all = "snake_case")]
+pub enum UnsolvedReason {
+    /// A candidate that would have made it faster did not fit in
+    /// `memory.budget_bytes`.
+    BudgetExhausted,
+    /// Most of what it still draws is geometry whose cluster is too close
+    /// to (or reaches into) the CPV's region for any view cell: its sphere
+    /// is nearer than its diameter and meets the region (the paper's
+    /// failure case: small, expensive objects close to the viewer).
+    ClusterContainsRegion,
+    /// Most of what it still draws is geometry far enough for a view cell,
+    /// but no impostor of it keeps the parallax within `max_error_px` with
+    /// at most 1,024 layers and `memory.max_texture_size` texels.
+    NoCandidateMeetsMaxErrorPx,
+    /// Impostors exist for what it draws, but none would render faster than
+    /// what it replaces (or everything is an impostor already and the
+    /// impostors alone exceed the target).
+    ImpostorsNotFaster,
+}
+
+impl UnsolvedReason {
+    /// The reason as the placement writes it.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            UnsolvedReason::BudgetExhausted => "budget_exhausted",
+            UnsolvedReason::ClusterContainsRegion => "cluster_contains_region",
+            UnsolvedReason::NoCandidateMeetsMaxErrorPx => "no_candidate_meets_max_error_px",
+            UnsolvedReason::ImpostorsNotFaster => "impostors_not_faster",
+        }
+    }
 }
 
 /// A bounding sphere.
@@ -182,6 +230,10 @@ pub struct PlacedCpv {
     pub time_ms_final: f64,
     /// True when `time_ms_final` is within the target.
     pub solved: bool,
+    /// Why an unsolved CPV could not be solved (absent when solved, and for
+    /// methods that do not explain it).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub unsolved_reason: Option<UnsolvedReason>,
     /// Ids of the impostors to draw in this CPV, ascending.
     pub impostors: Vec<u32>,
 }

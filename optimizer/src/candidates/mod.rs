@@ -473,3 +473,91 @@ pub fn generate(ctx: &Context, job: &Job, pv: &ProblemViews) -> Candidates {
         served,
     }
 }
+
+/// What view cells a cluster can have from a cell, judged on the smallest
+/// the generator builds for it there (the narrowest shaft at the cell's
+/// distance step; the cell's own box): see [`outlook`].
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Outlook {
+    /// No view cell can hold the cell: the cluster's sphere is nearer than
+    /// its diameter (shafts) and meets the cell (boxes).
+    TooClose,
+    /// A view cell can hold the cell, but no impostor of the cluster keeps
+    /// the parallax within `max_error_px` (layer cap, texture size).
+    OverErrorBudget,
+    /// An impostor exists.
+    Possible,
+}
+
+/// The [`Outlook`] of the cluster of bounding sphere `sphere` from the cell
+/// `region`, at `dist` from its centre, for `job`'s method.
+pub fn outlook(
+    job: &Job,
+    imodel: &ImpostorModel,
+    sphere: &crate::math::geom::Sphere,
+    region: &Aabb,
+    dist: f64,
+) -> Outlook {
+    let method = job.method();
+    let shafts = matches!(method, Method::Shafts | Method::Both | Method::ShaftsPrune);
+    let boxes = matches!(method, Method::Boxes | Method::Both | Method::PerCell);
+    let size = 2.0 * sphere.radius;
+    let shaft_fits = shafts && size > 0.0 && dist >= size;
+    let box_fits = boxes && region.distance_to_point(sphere.center) > sphere.radius;
+    if !shaft_fits && !box_fits {
+        return Outlook::TooClose;
+    }
+    let shaft = || {
+        let steps = job.candidates.min_distance_steps.max(1);
+        let last_k = job.candidates.min_distance_doublings.saturating_mul(steps);
+        let k = ladder_index(size, dist, steps, last_k);
+        let alpha = half_angles(job).first().copied()?;
+        imodel.shaft(sphere, alpha, ladder_distance(size, k, steps))
+    };
+    let possible =
+        (box_fits && imodel.boxed(sphere, region).is_some()) || (shaft_fits && shaft().is_some());
+    if possible {
+        Outlook::Possible
+    } else {
+        Outlook::OverErrorBudget
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::math::geom::Sphere;
+    use crate::testutil::synthetic_job;
+
+    /// The outlook names what stops an impostor: a cell the cluster
+    /// reaches into, an error budget no texture can meet, or nothing.
+    #[test]
+    fn outlook_names_what_stops_an_impostor() {
+        let mut job = synthetic_job(5, 5);
+        job.candidates.view_cells = crate::api::job::ViewCellKind::Both;
+        let sphere = Sphere {
+            center: DVec3::ZERO,
+            radius: 10.0,
+        };
+        let cell = |x: f64| Aabb::new(DVec3::new(x, -2.0, -2.0), DVec3::new(x + 4.0, 2.0, 2.0));
+        let look = |job: &Job, x: f64| {
+            let region = cell(x);
+            let dist = region.distance_to_point(sphere.center);
+            outlook(job, &ImpostorModel::new(job), &sphere, &region, dist)
+        };
+        // 5 m from the centre: inside the sphere, no shaft, no box.
+        assert_eq!(look(&job, 5.0), Outlook::TooClose);
+        assert_eq!(look(&job, 200.0), Outlook::Possible);
+        // 15 m: outside the sphere but nearer than its diameter: a box
+        // could hold the cell, a shaft could not.
+        assert_ne!(look(&job, 15.0), Outlook::TooClose);
+        job.candidates.view_cells = crate::api::job::ViewCellKind::Shafts;
+        assert_eq!(look(&job, 15.0), Outlook::TooClose);
+        assert_eq!(look(&job, 200.0), Outlook::Possible);
+        job.candidates.view_cells = crate::api::job::ViewCellKind::Boxes;
+        assert_eq!(look(&job, 60.0), Outlook::Possible);
+        // No texture of 4 texels a side keeps 1 px.
+        job.memory.max_texture_size = 4;
+        assert_eq!(look(&job, 200.0), Outlook::OverErrorBudget);
+    }
+}

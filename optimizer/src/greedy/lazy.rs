@@ -6,6 +6,7 @@ use std::collections::BinaryHeap;
 use rayon::prelude::*;
 
 use super::{Key, Selection, State};
+use crate::api::job::Job;
 use crate::candidates::{Candidate, Candidates};
 use crate::math::IdRange;
 use crate::views::{Context, ProblemViews};
@@ -88,11 +89,12 @@ pub const LAZY_BATCH: usize = 32;
 /// caller discards the incomplete selection).
 pub fn select_lazy(
     ctx: &Context,
+    job: &Job,
     pv: &ProblemViews,
     cands: &Candidates,
     progress: &mut dyn FnMut(u64) -> bool,
 ) -> Selection {
-    select_lazy_with(ctx, pv, cands, progress, None)
+    select_lazy_with(ctx, job, pv, cands, progress, None)
 }
 
 /// [`select_lazy`] removing outdated heap keys first when the heap holds
@@ -101,12 +103,13 @@ pub fn select_lazy(
 /// removal runs on small inputs; the selection is the same either way.
 pub(crate) fn select_lazy_with(
     ctx: &Context,
+    job: &Job,
     pv: &ProblemViews,
     cands: &Candidates,
     progress: &mut dyn FnMut(u64) -> bool,
     first_compaction: Option<usize>,
 ) -> Selection {
-    let mut st = State::new(ctx, pv, cands);
+    let mut st = State::new(ctx, pv, cands, job.memory.budget_bytes);
     if !progress(st.unsolved()) {
         return st.sel;
     }
@@ -117,7 +120,9 @@ pub(crate) fn select_lazy_with(
     let firsts: Vec<u32> = (0..cands.list.len() as u32)
         .filter(|&i| blocks[i as usize].start == i)
         .collect();
-    let best = |b: u32, scores: &[f64]| {
+    // The best candidate of block `b` that fits in the memory budget
+    // (one that does not never will: the budget's spending only grows).
+    let best = |st: &State, b: u32, scores: &[f64]| {
         scores
             .iter()
             .enumerate()
@@ -125,14 +130,14 @@ pub(crate) fn select_lazy_with(
                 score,
                 id: b + k as u32,
             })
+            .filter(|k| k.score > 0.0 && st.fits(k.id))
             .max()
-            .filter(|k| k.score > 0.0)
     };
     let initial: Vec<Option<Key>> = firsts
         .par_iter()
         .map(|&b| {
             let scores = st.bound_block(blocks[b as usize]);
-            (scores.len() as u64, best(b, &scores))
+            (scores.len() as u64, best(&st, b, &scores))
         })
         .collect::<Vec<_>>()
         .into_iter()
@@ -167,7 +172,7 @@ pub(crate) fn select_lazy_with(
             continue;
         }
         let current = |e: &Entry| e.stamp == version || st.unchanged_since(e.key.id, e.stamp);
-        if top.exact && current(&top) {
+        if top.exact && current(&top) && st.fits(top.key.id) {
             heap.pop();
             st.accept(top.key.id);
             // The block's other candidates keep the key as a bound, out
@@ -183,17 +188,18 @@ pub(crate) fn select_lazy_with(
             continue;
         }
         // The blocks at the top whose keys are not exact now, up to a
-        // batch, computed again in parallel: a current bound becomes exact
-        // scores, anything older a current bound. An exact current key ends
-        // the batch.
+        // batch, computed again in parallel: a current key becomes exact
+        // scores (a current exact one whose candidate no longer fits in the
+        // budget: its block's others), anything older a current bound. An
+        // exact current key that fits ends the batch.
         stale.clear();
         while stale.len() < batch {
             match heap.peek() {
                 Some(e) if e.seq < latest[block_of(e)] => {
                     heap.pop();
                 }
-                Some(e) if !(e.exact && current(e)) => {
-                    stale.push((block_of(e) as u32, !e.exact && current(e)));
+                Some(e) if !(e.exact && current(e) && st.fits(e.key.id)) => {
+                    stale.push((block_of(e) as u32, current(e)));
                     heap.pop();
                 }
                 _ => break,
@@ -217,7 +223,7 @@ pub(crate) fn select_lazy_with(
             }
             seq += 1;
             latest[b as usize] = seq;
-            if let Some(key) = best(b, &scores) {
+            if let Some(key) = best(&st, b, &scores) {
                 heap.push(Entry {
                     key,
                     seq,
@@ -234,6 +240,9 @@ pub(crate) fn select_lazy_with(
             heap.retain(|e| e.seq >= latest[block_of(e)]);
             compact_at = compact_at.max(2 * heap.len());
         }
+    }
+    if !ctx.cancelled() {
+        st.sel.reasons = st.explain_unsolved(job);
     }
     st.sel
 }

@@ -27,11 +27,14 @@
 use std::cmp::Ordering;
 use std::ops::Range;
 
+use crate::api::job::Job;
+use crate::api::placement::UnsolvedReason;
 use crate::candidates::{Candidate, Candidates, Group};
 use crate::math::IdRange;
 use crate::model::cost::Cost;
 use crate::views::{Context, Cpv, ProblemViews};
 
+mod explain;
 mod lazy;
 mod marks;
 #[cfg(test)]
@@ -59,6 +62,9 @@ pub struct Selection {
     pub bounds: u64,
     /// Impostors removed by the pruning pass.
     pub pruned: u64,
+    /// Per CPV: why it is still above `t_max` (`None` when solved; empty
+    /// when every CPV is solved). See [`State::explain_unsolved`].
+    pub reasons: Vec<Option<UnsolvedReason>>,
 }
 
 impl Selection {
@@ -129,6 +135,14 @@ struct State<'a> {
     /// from `excess` whenever one of them changes. No candidate gains more
     /// in the cell than this (see [`State::bound_block`]).
     cell_excess: Vec<f64>,
+    /// The most memory the impostors may take (`memory.budget_bytes`).
+    budget: Option<u64>,
+    /// The memory of every candidate accepted so far, counted once each,
+    /// whether or not later choices replaced it: budget checks use it, so
+    /// a candidate that does not fit never fits later.
+    spent: u64,
+    /// Per candidate: accepted at least once (its memory is in `spent`).
+    chosen: Vec<bool>,
     sel: Selection,
 }
 
@@ -142,7 +156,12 @@ struct Effect {
 }
 
 impl<'a> State<'a> {
-    fn new(ctx: &'a Context<'a>, pv: &'a ProblemViews, cands: &'a Candidates) -> Self {
+    fn new(
+        ctx: &'a Context<'a>,
+        pv: &'a ProblemViews,
+        cands: &'a Candidates,
+        budget: Option<u64>,
+    ) -> Self {
         let mut st = State {
             ctx,
             pv,
@@ -167,6 +186,9 @@ impl<'a> State<'a> {
                 v
             },
             cell_excess: vec![0.0; pv.kd.len()],
+            budget,
+            spent: 0,
+            chosen: vec![false; cands.list.len()],
             unsolved: {
                 let mut v = vec![0u64; pv.cpvs.len().div_ceil(64)];
                 for (i, c) in pv.cpvs.iter().enumerate() {
@@ -184,6 +206,7 @@ impl<'a> State<'a> {
                 evaluations: 0,
                 bounds: 0,
                 pruned: 0,
+                reasons: Vec::new(),
             },
         };
         for kd in 0..st.cell_cpvs.len() {
@@ -226,6 +249,22 @@ impl<'a> State<'a> {
             .iter()
             .filter(|&&e| e > 0.0)
             .sum()
+    }
+
+    /// True when candidate `i` may be accepted within the memory budget:
+    /// accepted before, or its memory fits beside what was spent.
+    fn fits(&self, i: u32) -> bool {
+        self.chosen[i as usize]
+            || self.budget.is_none_or(|b| {
+                self.spent
+                    .saturating_add(self.cands[i as usize].spec.memory_bytes)
+                    <= b
+            })
+    }
+
+    /// True when CPV `c` is still above `t_max`.
+    fn is_unsolved(&self, c: u32) -> bool {
+        self.unsolved[c as usize / 64] >> (c % 64) & 1 == 1
     }
 
     /// CPVs still above `t_max`.
@@ -469,6 +508,10 @@ impl<'a> State<'a> {
     }
 
     fn accept(&mut self, i: u32) {
+        if !self.chosen[i as usize] {
+            self.chosen[i as usize] = true;
+            self.spent += self.cands[i as usize].spec.memory_bytes;
+        }
         let mut changes: Vec<(u32, Cost, Cost)> = Vec::new();
         self.for_each_effect(i, |c, e| {
             if e.accelerates {
@@ -539,8 +582,8 @@ impl<'a> State<'a> {
 
 /// Naive greedy selection: recomputes every score after each choice. Only
 /// for testing the lazy variant on small inputs.
-pub fn select_naive(ctx: &Context, pv: &ProblemViews, cands: &Candidates) -> Selection {
-    let mut st = State::new(ctx, pv, cands);
+pub fn select_naive(ctx: &Context, job: &Job, pv: &ProblemViews, cands: &Candidates) -> Selection {
+    let mut st = State::new(ctx, pv, cands, job.memory.budget_bytes);
     let mut alive: Vec<u32> = (0..cands.list.len() as u32).collect();
     loop {
         let mut best: Option<Key> = None;
@@ -548,7 +591,7 @@ pub fn select_naive(ctx: &Context, pv: &ProblemViews, cands: &Candidates) -> Sel
         for &i in &alive {
             let score = st.score(i);
             st.sel.evaluations += 1;
-            if score <= 0.0 {
+            if score <= 0.0 || !st.fits(i) {
                 continue;
             }
             next_alive.push(i);
@@ -563,6 +606,7 @@ pub fn select_naive(ctx: &Context, pv: &ProblemViews, cands: &Candidates) -> Sel
             None => break,
         }
     }
+    st.sel.reasons = st.explain_unsolved(job);
     st.sel
 }
 
@@ -571,7 +615,7 @@ pub fn select_naive(ctx: &Context, pv: &ProblemViews, cands: &Candidates) -> Sel
 /// draws its cluster's objects as geometry there again; a removal is kept
 /// only if every CPV using the impostor stays within `t_max`.
 pub fn prune(ctx: &Context, pv: &ProblemViews, cands: &Candidates, sel: &mut Selection) {
-    let mut st = State::new(ctx, pv, cands);
+    let mut st = State::new(ctx, pv, cands, None);
     st.sel = sel.clone();
     let mut order = st.sel.impostors();
     order.sort_by_key(|&i| {
@@ -692,7 +736,7 @@ mod tests {
             let pv = views::approximate(&ctx, &job, &Counters::new());
             assert!(!pv.cpvs.is_empty(), "{combine:?}");
             let cands = crate::candidates::generate(&ctx, &job, &pv);
-            let mut st = State::new(&ctx, &pv, &cands);
+            let mut st = State::new(&ctx, &pv, &cands, None);
             let blocks = blocks(&cands.list);
             let (mut checked, mut tight) = (0, 0);
             for round in 0..12 {
@@ -738,7 +782,7 @@ mod tests {
         let ctx = Context::new(&scene, &h, None, &job, Control::default());
         let pv = views::approximate(&ctx, &job, &Counters::new());
         let cands = crate::candidates::generate(&ctx, &job, &pv);
-        let mut st = State::new(&ctx, &pv, &cands);
+        let mut st = State::new(&ctx, &pv, &cands, None);
         let blocks = blocks(&cands.list);
         // Blocks with several candidates exist (nested shafts).
         assert!(blocks.iter().any(|b| b.len() > 2));

@@ -2,9 +2,11 @@
 //! the problem views with their final times.
 
 use crate::api::job::Job;
+use std::collections::BTreeMap;
+
 use crate::api::placement::{
     DirectionsJson, PlacedCpv, PlacedImpostor, Placement, RegionJson, SphereJson, Summary,
-    ViewCellJson,
+    UnsolvedReason, ViewCellJson,
 };
 use crate::candidates::Candidates;
 use crate::greedy::Selection;
@@ -62,12 +64,15 @@ pub fn build_placement(
         impostors,
         cpv_impostors,
         &sel.cpv_cost,
+        &sel.reasons,
         cands.list.len() as u64,
     )
 }
 
 /// The placement JSON of `impostors` (ids are indices) used by the CPVs as
-/// `cpv_impostors` says, with the CPVs' final costs.
+/// `cpv_impostors` says, with the CPVs' final costs and, where the method
+/// explains them, why unsolved CPVs are (`reasons`, per CPV, or empty).
+#[allow(clippy::too_many_arguments)]
 pub fn assemble(
     ctx: &Context,
     job: &Job,
@@ -75,9 +80,12 @@ pub fn assemble(
     impostors: Vec<PlacedImpostor>,
     cpv_impostors: Vec<Vec<u32>>,
     cpv_cost: &[Cost],
+    reasons: &[Option<UnsolvedReason>],
     candidates: u64,
 ) -> Placement {
     let mut unsolved = 0u64;
+    let mut max_residual_ms = 0.0f64;
+    let mut unsolved_by_reason = BTreeMap::new();
     let cpvs: Vec<PlacedCpv> = pv
         .cpvs
         .iter()
@@ -87,7 +95,16 @@ pub fn assemble(
             imps.sort_unstable();
             let final_ms = ctx.model.frame_time(cpv_cost[ci]);
             let solved = final_ms <= job.target_frame_time_ms;
-            unsolved += u64::from(!solved);
+            let reason = if solved {
+                None
+            } else {
+                unsolved += 1;
+                max_residual_ms = max_residual_ms.max(final_ms - job.target_frame_time_ms);
+                reasons.get(ci).copied().flatten()
+            };
+            if let Some(r) = reason {
+                *unsolved_by_reason.entry(r).or_insert(0u64) += 1;
+            }
             PlacedCpv {
                 id: ci as u32,
                 region: RegionJson {
@@ -102,6 +119,7 @@ pub fn assemble(
                 time_ms_original: c.time,
                 time_ms_final: final_ms,
                 solved,
+                unsolved_reason: reason,
                 impostors: imps,
             }
         })
@@ -114,6 +132,9 @@ pub fn assemble(
             memory_bytes: impostors.iter().map(|i| i.memory_bytes).sum(),
             unsolved_cpvs: unsolved,
             target_frame_time_ms: job.target_frame_time_ms,
+            max_residual_ms,
+            unsolved_by_reason,
+            budget_bytes: job.memory.budget_bytes,
         },
         impostors,
         cpvs,

@@ -119,6 +119,7 @@ impl Prepared<'_> {
                 em.impostors,
                 em.cpv_impostors,
                 &em.cpv_cost,
+                &[],
                 0,
             );
             st.end("placement");
@@ -140,7 +141,7 @@ impl Prepared<'_> {
         st.begin("greedy", 0.2, &what);
         let total = pv.cpvs.len();
         let mut first_unsolved = None;
-        let mut sel = greedy::select_lazy(&ctx, &pv, &cands, &mut |unsolved| {
+        let mut sel = greedy::select_lazy(&ctx, job, &pv, &cands, &mut |unsolved| {
             let start = *first_unsolved.get_or_insert(unsolved.max(1));
             ctl.progress(
                 "greedy",
@@ -287,6 +288,7 @@ mod tests {
 
     use super::*;
     use crate::api::job::Method;
+    use crate::api::placement::UnsolvedReason;
     use crate::control::Event;
     use crate::evaluate::EvalOptions;
     use crate::scene::hierarchy::Hierarchy;
@@ -586,17 +588,119 @@ mod tests {
             let pv = views::approximate(&ctx, &job, &Counters::new());
             let cands = candidates::generate(&ctx, &job, &pv);
             assert!(!cands.list.is_empty());
-            let lazy = greedy::select_lazy(&ctx, &pv, &cands, &mut |_| true);
-            let naive = greedy::select_naive(&ctx, &pv, &cands);
+            let lazy = greedy::select_lazy(&ctx, &job, &pv, &cands, &mut |_| true);
+            let naive = greedy::select_naive(&ctx, &job, &pv, &cands);
             assert_eq!(lazy.uses, naive.uses, "seed {seed}");
             assert_eq!(lazy.cpv_impostors, naive.cpv_impostors);
             assert_eq!(lazy.accepted, naive.accepted);
             assert!(lazy.evaluations < naive.evaluations);
             // Removing outdated heap keys from the first refresh on does
             // not change the selection.
-            let compacted = greedy::select_lazy_with(&ctx, &pv, &cands, &mut |_| true, Some(0));
+            let compacted =
+                greedy::select_lazy_with(&ctx, &job, &pv, &cands, &mut |_| true, Some(0));
             assert_eq!(compacted.uses, lazy.uses, "seed {seed}");
             assert_eq!(compacted.cpv_impostors, lazy.cpv_impostors);
+            // Under a memory budget that binds, both skip the same
+            // candidates that do not fit.
+            let full: u64 = lazy
+                .impostors()
+                .iter()
+                .map(|&i| cands.list[i as usize].spec.memory_bytes)
+                .sum();
+            job.memory.budget_bytes = Some(full * 3 / 10);
+            let lazy = greedy::select_lazy(&ctx, &job, &pv, &cands, &mut |_| true);
+            let naive = greedy::select_naive(&ctx, &job, &pv, &cands);
+            assert_eq!(lazy.uses, naive.uses, "seed {seed}, budget");
+            assert_eq!(lazy.cpv_impostors, naive.cpv_impostors);
+            assert_eq!(lazy.reasons, naive.reasons);
+            assert!(
+                lazy.reasons
+                    .contains(&Some(UnsolvedReason::BudgetExhausted))
+            );
+            job.memory.budget_bytes = None;
+        }
+    }
+
+    /// A budget of 0 places nothing: every CPV stays unsolved, as far above
+    /// the target as it was, because of the budget.
+    #[test]
+    fn a_zero_budget_places_nothing_and_says_why() {
+        let scene = synthetic_city(1, 5, 5);
+        let mut job = synthetic_job(5, 5);
+        job.memory.budget_bytes = Some(0);
+        let p = place(&scene, &job);
+        assert_eq!(p.summary.impostors, 0);
+        assert_eq!(p.summary.memory_bytes, 0);
+        assert!(p.summary.cpvs > 0);
+        assert_eq!(p.summary.unsolved_cpvs, p.summary.cpvs);
+        assert_eq!(p.summary.budget_bytes, Some(0));
+        let worst = p
+            .cpvs
+            .iter()
+            .map(|c| c.time_ms_original)
+            .fold(0.0, f64::max);
+        assert!((p.summary.max_residual_ms - (worst - job.target_frame_time_ms)).abs() < 1e-9);
+        for c in &p.cpvs {
+            assert!(!c.solved && c.impostors.is_empty());
+            assert_eq!(c.time_ms_final, c.time_ms_original);
+            assert!(c.unsolved_reason.is_some(), "CPV {}", c.id);
+        }
+        let budget = p.summary.unsolved_by_reason[&UnsolvedReason::BudgetExhausted];
+        assert!(budget > p.summary.cpvs / 2, "{:?}", p.summary);
+        assert_eq!(
+            p.summary.unsolved_by_reason.values().sum::<u64>(),
+            p.summary.cpvs
+        );
+    }
+
+    /// Budgets at a half, a quarter and a tenth of the unbudgeted memory:
+    /// the placement stays within each, the CPVs it solves are solved for
+    /// every sampled view, and what it leaves unsolved grows as the budget
+    /// shrinks, each with its reason and residual time.
+    #[test]
+    fn a_memory_budget_is_kept_and_the_solved_cpvs_hold() {
+        let scene = synthetic_city(2, 5, 5);
+        let mut job = synthetic_job(5, 5);
+        let free = place(&scene, &job);
+        eprintln!("{:?}", free.summary);
+        // Without a budget, no CPV is unsolved for lack of one.
+        let r = &free.summary.unsolved_by_reason;
+        assert!(!r.contains_key(&UnsolvedReason::BudgetExhausted), "{r:?}");
+        assert_eq!(r.values().sum::<u64>(), free.summary.unsolved_cpvs);
+        let full = free.summary.memory_bytes;
+        let mut last_unsolved = free.summary.unsolved_cpvs;
+        for part in [2, 4, 10] {
+            let budget = full / part;
+            job.memory.budget_bytes = Some(budget);
+            let p = place(&scene, &job);
+            assert!(
+                p.summary.memory_bytes <= budget,
+                "1/{part}: {:?}",
+                p.summary
+            );
+            assert!(
+                p.summary.memory_bytes > budget / 2,
+                "1/{part}: {:?}",
+                p.summary
+            );
+            assert!(p.summary.unsolved_cpvs > last_unsolved, "1/{part}");
+            last_unsolved = p.summary.unsolved_cpvs;
+            assert!(p.summary.max_residual_ms > 0.0);
+            for c in &p.cpvs {
+                assert_eq!(c.solved, c.unsolved_reason.is_none(), "CPV {}", c.id);
+            }
+            let eval = evaluate(
+                &scene,
+                &job,
+                &p,
+                &EvalOptions {
+                    views: 2000,
+                    seed: 3,
+                    ..EvalOptions::default()
+                },
+            )
+            .unwrap();
+            assert_eq!(eval.violations_in_solved, 0, "1/{part}: {eval:?}");
         }
     }
 

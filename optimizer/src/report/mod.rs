@@ -31,6 +31,10 @@ pub struct Report {
     pub methods: Vec<String>,
     /// The knob sweeps, in the order given.
     pub sweeps: Vec<Sweep>,
+    /// Memory budgets as fractions of each method's unbudgeted memory
+    /// (`--budgets`): runs with knob `memory.budget_bytes`.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub budgets: Vec<f64>,
     /// Every (method, setting) run.
     pub runs: Vec<Run>,
     /// Frame times along a walkthrough path, per (method, target).
@@ -126,6 +130,13 @@ pub struct Run {
     pub memory_bytes: u64,
     /// Problem views still above the target.
     pub unsolved_cpvs: u64,
+    /// How far the worst unsolved problem view's estimate stays above the
+    /// target, ms (0 when all are solved).
+    #[serde(default)]
+    pub max_residual_ms: f64,
+    /// The impostor memory budget of the run, bytes, if it had one.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub budget_bytes: Option<u64>,
     /// Preprocessing wall time (placement), seconds.
     pub seconds: f64,
     /// Wall time per stage.

@@ -26,12 +26,34 @@ pub struct ReportOptions {
     pub sweeps: Vec<Sweep>,
     /// Also run the stability perturbations.
     pub stability: bool,
+    /// Memory budgets, as fractions of each method's unbudgeted memory
+    /// (its base run's), each run and evaluated after the base runs.
+    pub budgets: Vec<f64>,
     /// Views per evaluation.
     pub views: u64,
 }
 
 /// The knob that sweeps the target frame time.
 pub const TARGET: &str = "target_frame_time_ms";
+
+/// The knob of the budget runs (`--budgets`).
+pub const BUDGET: &str = "memory.budget_bytes";
+
+/// Parses `--budgets`: fractions in (0, 1] of the unbudgeted memory.
+pub fn parse_budgets(values: &[f64]) -> Result<Vec<f64>> {
+    if values.len() > 64 {
+        return Err(Error::bad("--budgets", "give at most 64 fractions"));
+    }
+    for &f in values {
+        if !(f.is_finite() && f > 0.0 && f <= 1.0) {
+            return Err(Error::bad(
+                "--budgets",
+                format!("{f} must be a fraction of the unbudgeted memory in (0, 1]"),
+            ));
+        }
+    }
+    Ok(values.to_vec())
+}
 
 /// Knobs that change the prepared scene (levels of detail, the visibility
 /// mode) cannot be swept: each value would need its own preparation.
@@ -55,9 +77,11 @@ fn with_knob(job: &Value, knob: &str, value: f64) -> Result<Value> {
             )
         })?;
         if i + 1 == parts.len() {
-            let old = obj.get(*p).ok_or_else(|| {
-                Error::bad("--sweep", format!("{knob}: the job has no field `{p}`"))
-            })?;
+            // A field the job leaves out (an optional one, such as
+            // `memory.budget_bytes`) is added: the job's parser rejects
+            // names it does not know.
+            let absent = !obj.contains_key(*p);
+            let old = obj.get(*p).cloned().unwrap_or(Value::from(0u64));
             if !old.is_number() {
                 return Err(Error::bad(
                     "--sweep",
@@ -72,6 +96,12 @@ fn with_knob(job: &Value, knob: &str, value: f64) -> Result<Value> {
                     .ok_or_else(|| Error::bad("--sweep", format!("{knob}={value} is not finite")))?
             };
             obj.insert((*p).to_string(), num);
+            if absent && serde_json::from_value::<Job>(v.clone()).is_err() {
+                return Err(Error::bad(
+                    "--sweep",
+                    format!("{knob}: the job has no field `{p}`"),
+                ));
+            }
             return Ok(v);
         }
         cur = obj
@@ -210,6 +240,8 @@ pub fn place_and_evaluate(
         impostors: p.summary.impostors,
         memory_bytes: p.summary.memory_bytes,
         unsolved_cpvs: p.summary.unsolved_cpvs,
+        max_residual_ms: p.summary.max_residual_ms,
+        budget_bytes: p.summary.budget_bytes,
         seconds,
         stage_seconds: out.stats.seconds.clone(),
         eval: Some(EvalSummary::from(&evaluation)),
@@ -331,7 +363,7 @@ pub fn run(
     let has_target_sweep = opts.sweeps.iter().any(|s| s.knob == TARGET);
     // Per method: the base, four targets, the shifted grid, two shuffles.
     let perturbations = if opts.stability { 8 } else { 0 };
-    let total = plan.len() + opts.methods.len() * perturbations;
+    let total = plan.len() + opts.methods.len() * (perturbations + opts.budgets.len());
     let mut done = 0usize;
     let mut step = |message: &str| -> Result<()> {
         ctl.progress("report", done as f64 / total as f64, message);
@@ -367,6 +399,31 @@ pub fn run(
             run.value = Some(*v);
         }
         runs.push(run);
+    }
+    // Budgets: fractions of each method's unbudgeted memory.
+    for &m in &opts.methods {
+        let Some(free) = runs
+            .iter()
+            .find(|x| x.knob.is_none() && x.method == m.name() && x.status == RunStatus::Ok)
+            .map(|x| x.memory_bytes)
+        else {
+            continue;
+        };
+        for &f in &opts.budgets {
+            let budget = (free as f64 * f).floor() as u64;
+            let mut j = base.clone();
+            j.method = Some(m);
+            j.memory.budget_bytes = Some(budget);
+            step(&format!("{} budget {:.0} %", m.name(), f * 100.0))?;
+            let mut run = match one_run(&mut preps, input, &j, opts.views, false) {
+                Ok((run, _)) => run,
+                Err(e @ (Error::BadInput { .. } | Error::Cancelled)) => failed(&j, &e),
+                Err(e) => return Err(e),
+            };
+            run.knob = Some(BUDGET.into());
+            run.value = Some(budget as f64);
+            runs.push(run);
+        }
     }
     let stability = if opts.stability {
         let mut methods = Vec::new();
@@ -446,6 +503,7 @@ pub fn run(
         job: job_text.clone(),
         methods: opts.methods.iter().map(|m| m.name().into()).collect(),
         sweeps: opts.sweeps.clone(),
+        budgets: opts.budgets.clone(),
         runs,
         walkthroughs,
         stability,
@@ -479,6 +537,7 @@ pub fn single_run_report(
         job: job_text.clone(),
         methods: vec![out.run.method.clone()],
         sweeps: Vec::new(),
+        budgets: Vec::new(),
         runs: vec![out.run.clone()],
         walkthroughs: out
             .frames
@@ -505,6 +564,13 @@ mod tests {
         let j = with_knob(&job, "candidates.min_distance_doublings", 8.0).unwrap();
         assert_eq!(j["candidates"]["min_distance_doublings"], 8);
         assert!(with_knob(&job, "problem_views.nope", 1.0).is_err());
+        // An optional field the job leaves out is added.
+        let j = with_knob(&job, "memory.budget_bytes", 1e6).unwrap();
+        assert_eq!(j["memory"]["budget_bytes"], 1_000_000);
+        assert_eq!(parse_budgets(&[0.5, 0.1]).unwrap(), vec![0.5, 0.1]);
+        for bad in [0.0, 1.5, -0.2, f64::NAN] {
+            assert!(parse_budgets(&[bad]).is_err(), "{bad}");
+        }
         assert!(with_knob(&job, "camera.resolution", 1.0).is_err());
         let s = parse_sweep("target_frame_time_ms=10, 15,20").unwrap();
         assert_eq!(s.values, vec![10.0, 15.0, 20.0]);

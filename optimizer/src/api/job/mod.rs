@@ -398,6 +398,12 @@ pub struct MemoryParams {
     /// cannot meet the quality criterion and is dropped. Default 2048.
     #[serde(default = "default_max_tex")]
     pub max_texture_size: u32,
+    /// The most impostor memory the placement may use, bytes (`None`: no
+    /// limit). The greedy then adds the candidates with the best frame-time
+    /// gain per byte that still fit; CPVs it cannot solve within the budget
+    /// are reported unsolved (`budget_exhausted`) with their residual times.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub budget_bytes: Option<u64>,
 }
 
 fn default_t_max() -> f64 {
@@ -551,6 +557,7 @@ impl Default for MemoryParams {
             bytes_per_texel: default_bpt(),
             mipmaps: default_true(),
             max_texture_size: default_max_tex(),
+            budget_bytes: None,
         }
     }
 }

@@ -4,7 +4,7 @@
 use crate::report::{Report, Run};
 
 /// Header of `runs.csv`.
-const RUNS_HEADER: [&str; 22] = [
+const RUNS_HEADER: [&str; 24] = [
     "method",
     "knob",
     "value",
@@ -16,6 +16,8 @@ const RUNS_HEADER: [&str; 22] = [
     "impostors",
     "memory_bytes",
     "unsolved_cpvs",
+    "max_residual_ms",
+    "budget_bytes",
     "seconds",
     "stage_seconds",
     "eval_views",
@@ -71,6 +73,8 @@ fn runs_csv(runs: &[Run]) -> String {
             run.impostors.to_string(),
             run.memory_bytes.to_string(),
             run.unsolved_cpvs.to_string(),
+            run.max_residual_ms.to_string(),
+            run.budget_bytes.map(|b| b.to_string()).unwrap_or_default(),
             run.seconds.to_string(),
             stages.join(";"),
         ];

@@ -29,6 +29,9 @@ use super::{MethodStability, Report, Run, RunStatus};
 
 /// The knob of the target frame time sweep.
 const TARGET_KNOB: &str = "target_frame_time_ms";
+
+/// The knob of the memory budget runs.
+const BUDGET_KNOB: &str = super::run::BUDGET;
 /// Series colours, by method (or target) index.
 const PALETTE: [&str; 10] = [
     "#1f77b4", "#d62728", "#2ca02c", "#ff7f0e", "#9467bd", "#8c564b", "#e377c2", "#17becf",
@@ -61,9 +64,22 @@ pub fn render_html(r: &Report) -> String {
         esc(&title)
     );
     p.setup(&mut h);
-    h.push_str("<nav><a href=\"#memory\">Memory</a> · <a href=\"#achieved\">Frame time</a> · <a href=\"#speed\">Speed vs accuracy</a> · <a href=\"#walkthrough\">Walkthrough</a> · <a href=\"#stability\">Stability</a> · <a href=\"#runs\">Runs</a></nav>\n");
+    let budget_link = if r
+        .runs
+        .iter()
+        .any(|x| x.knob.as_deref() == Some(BUDGET_KNOB))
+    {
+        " · <a href=\"#budget\">Budget</a>"
+    } else {
+        ""
+    };
+    let _ = writeln!(
+        h,
+        "<nav><a href=\"#memory\">Memory</a> · <a href=\"#achieved\">Frame time</a>{budget_link} · <a href=\"#speed\">Speed vs accuracy</a> · <a href=\"#walkthrough\">Walkthrough</a> · <a href=\"#stability\">Stability</a> · <a href=\"#runs\">Runs</a></nav>"
+    );
     p.memory_chart(&mut h);
     p.achieved_chart(&mut h);
+    p.budget_chart(&mut h);
     p.speed_charts(&mut h);
     p.walkthrough_charts(&mut h);
     p.stability(&mut h);
@@ -307,14 +323,16 @@ mod tests {
         assert!(html.starts_with("<!DOCTYPE html>"));
         assert_eq!(html.matches("<html").count(), 1);
         assert_eq!(html.matches("</html>").count(), 1);
-        // Memory, achieved, one speed chart (cell size), two walkthroughs
-        // (shafts, boxes), stability.
-        assert_eq!(html.matches("<svg").count(), 6);
-        assert_eq!(html.matches("</svg>").count(), 6);
+        // Memory, achieved, budget, two speed charts (cell size, budget),
+        // two walkthroughs (shafts, boxes), stability.
+        assert_eq!(html.matches("<svg").count(), 8);
+        assert_eq!(html.matches("</svg>").count(), 8);
         for id in [
             "chart-memory",
             "chart-achieved",
+            "chart-budget",
             "chart-speed-0",
+            "chart-speed-1",
             "chart-walk-0",
             "chart-walk-1",
             "chart-stability",
@@ -480,6 +498,39 @@ mod tests {
         let stab = &files[2].1;
         assert_eq!(stab.lines().count(), 9);
         assert!(stab.contains("\r\nboxes,target +5%,ok,8600000,86,0,19\r\n"));
+    }
+
+    /// The budget chart draws, per budgeted method, its base and budget
+    /// runs by memory (max, p99, the estimated worst problem view) with the
+    /// target; a report without budget runs has no such section.
+    #[test]
+    fn budget_chart_shows_frame_time_against_memory() {
+        let r = sample_report();
+        let html = render_html(&r);
+        let svg = chart_svg(&html, "chart-budget");
+        assert!(svg.contains("impostor memory (MB)") && svg.contains("frame time (ms)"));
+        for s in [
+            "shafts: max",
+            "shafts: p99",
+            "shafts: estimated worst problem view",
+            "target 20 ms",
+        ] {
+            assert!(svg.contains(s), "{s}");
+        }
+        // Only shafts has budget runs.
+        assert!(!svg.contains("boxes: max"));
+        // Base (3 MB), half and quarter budgets: three points per series.
+        assert!(svg.contains("budget 0.750 MB") && svg.contains("budget 1.500 MB"));
+        assert!(svg.contains("no budget"));
+        let cap = between(&html, "<figure id=\"chart-budget\">", "</figure>");
+        assert!(cap.contains("(50 %, 25 %)"), "{cap}");
+        assert!(html.contains("href=\"#budget\""));
+        let mut plain = r.clone();
+        plain
+            .runs
+            .retain(|x| x.knob.as_deref() != Some(BUDGET_KNOB));
+        let html = render_html(&plain);
+        assert!(!html.contains("chart-budget") && !html.contains("#budget"));
     }
 
     #[test]

@@ -240,6 +240,117 @@ impl<'a> Page<'a> {
         h.push_str("</ul>\n");
     }
 
+    /// Frame time against memory under budgets (`--budgets`): per method,
+    /// its unbudgeted base run and its budget runs, the evaluated maximum
+    /// and 99th percentile and the placement's own estimate of its worst
+    /// problem view, against the memory used, with the target. Nothing
+    /// when the report has no budget run.
+    pub(super) fn budget_chart(&self, h: &mut String) {
+        let budgeted: Vec<&Run> = self
+            .r
+            .runs
+            .iter()
+            .filter(|x| x.knob.as_deref() == Some(BUDGET_KNOB))
+            .collect();
+        if budgeted.is_empty() {
+            return;
+        }
+        let mut c = Chart {
+            id: "chart-budget".into(),
+            title: "Frame time vs memory budget".into(),
+            desc: "Frame time in ms against impostor memory in MB per method, from the unbudgeted                    placement down the memory budgets: evaluated maximum, 99th percentile and the                    placement's estimate for its worst problem view, with the target."
+                .into(),
+            x_label: "impostor memory (MB)".into(),
+            y_label: "frame time (ms)".into(),
+            ..Chart::default()
+        };
+        let mut targets: Vec<f64> = Vec::new();
+        let mut xs: Vec<f64> = Vec::new();
+        for m in self.methods_of(&budgeted) {
+            let mut runs: Vec<&Run> = self
+                .r
+                .runs
+                .iter()
+                .filter(|x| {
+                    x.method == m
+                        && is_ok(x)
+                        && x.eval.is_some()
+                        && (x.knob.is_none() || x.knob.as_deref() == Some(BUDGET_KNOB))
+                })
+                .collect();
+            runs.sort_by_key(|x| x.memory_bytes);
+            let col = self.color(m);
+            let mut max = Series::new(format!("{m}: max"), col, Line::Solid, Marker::Circle);
+            let mut p99 = Series::new(format!("{m}: p99"), col, Line::Dashed, Marker::Square);
+            let mut est = Series::new(
+                format!("{m}: estimated worst problem view"),
+                col,
+                Line::Dotted,
+                Marker::Triangle,
+            );
+            for x in runs {
+                let Some(e) = &x.eval else { continue };
+                let mem = mb(x.memory_bytes);
+                let t = x.target_frame_time_ms;
+                if !targets.contains(&t) {
+                    targets.push(t);
+                }
+                xs.push(mem);
+                let budget = x.budget_bytes.map_or_else(
+                    || "no budget".to_string(),
+                    |b| format!("budget {:.3} MB", mb(b)),
+                );
+                let tip = |what: &str, v: f64| {
+                    format!(
+                        "{m}, {budget}: {mem:.3} MB used, {what} {v:.3} ms, {} problem views unsolved",
+                        x.unsolved_cpvs
+                    )
+                };
+                max.points.push((mem, e.max_ms));
+                max.tips.push(tip("max", e.max_ms));
+                p99.points.push((mem, e.p99_ms));
+                p99.tips.push(tip("p99", e.p99_ms));
+                let worst = t + x.max_residual_ms;
+                est.points.push((mem, worst));
+                est.tips.push(tip("estimated worst problem view", worst));
+            }
+            push_nonempty(&mut c, max);
+            push_nonempty(&mut c, p99);
+            push_nonempty(&mut c, est);
+        }
+        let lo = xs.iter().copied().fold(f64::INFINITY, f64::min);
+        let hi = xs.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+        if lo.is_finite() && hi.is_finite() {
+            for t in targets {
+                let mut g = Series::new(format!("target {t} ms"), INK, Line::Dashed, Marker::None);
+                g.points = vec![(lo, t), (hi.max(lo + 1e-9), t)];
+                g.guide = true;
+                c.series.push(g);
+            }
+        }
+        let fractions: Vec<String> = self
+            .r
+            .budgets
+            .iter()
+            .map(|f| format!("{:.0} %", f * 100.0))
+            .collect();
+        let cap = format!(
+            "What a memory budget costs in frame time: each method's unbudgeted placement and              its placements under budgets{} of that memory. Solid: maximum over the sampled              views; dashed: 99th percentile; dotted: the placement's own estimate for its worst              problem view (the target plus the largest residual of the problem views the budget              left unsolved). Views in solved problem views stay within the target at every budget              (see the table of runs).",
+            if fractions.is_empty() {
+                String::new()
+            } else {
+                format!(" ({})", fractions.join(", "))
+            }
+        );
+        section_start(h, "budget", "Frame time vs memory budget");
+        figure(h, &c, &cap);
+        self.left_out(h, &budgeted, true, |x| is_ok(x) && x.eval.is_some());
+        h.push_str(
+            "</section>
+",
+        );
+    }
+
     pub(super) fn speed_charts(&self, h: &mut String) {
         section_start(
             h,
