@@ -60,15 +60,34 @@ impl Hierarchy {
                 radius: o.radius(),
             })
             .collect();
-        // Boxes for the builder only. A tiny deterministic offset per object
-        // breaks ties between identical boxes, which otherwise make the
-        // clustering quadratic and the tree a chain; the tree's own bounds
-        // are recomputed exactly below.
-        let boxes: Vec<BAabb> = scene
-            .objects
+        // The builder sees the objects in a canonical order, by their
+        // bounds (then triangles and draw calls; the id only between
+        // identical objects), so the tree depends on the geometry alone and
+        // not on the order of the scene's nodes.
+        let mut canon: Vec<u32> = (0..scene.objects.len() as u32).collect();
+        canon.sort_unstable_by(|&a, &b| {
+            let (oa, ob) = (&scene.objects[a as usize], &scene.objects[b as usize]);
+            let key =
+                |o: &crate::scene::Object| [o.min.x, o.min.y, o.min.z, o.max.x, o.max.y, o.max.z];
+            key(oa)
+                .iter()
+                .zip(key(ob).iter())
+                .map(|(x, y)| x.total_cmp(y))
+                .find(|o| o.is_ne())
+                .unwrap_or(std::cmp::Ordering::Equal)
+                .then(oa.triangles.cmp(&ob.triangles))
+                .then(oa.draw_calls.cmp(&ob.draw_calls))
+                .then(a.cmp(&b))
+        });
+        // Boxes for the builder only, in canonical order. A tiny
+        // deterministic offset per position breaks ties between identical
+        // boxes, which otherwise make the clustering quadratic and the tree
+        // a chain; the tree's own bounds are recomputed exactly below.
+        let boxes: Vec<BAabb> = canon
             .iter()
             .enumerate()
-            .map(|(i, o)| {
+            .map(|(i, &id)| {
+                let o = &scene.objects[id as usize];
                 let size = (o.max - o.min).max_element().max(1e-3);
                 let h = (i as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15);
                 let jitter = |shift: u32| ((h >> shift) & 0xFFFF) as f64 / 65535.0 - 0.5;
@@ -86,8 +105,8 @@ impl Hierarchy {
         let mut build_time = Duration::ZERO;
         let bvh = build_bvh2(&boxes, params, &mut build_time);
 
-        // Pre-order walk; a leaf keeps its objects sorted by id so the tree
-        // does not depend on the builder's leaf order.
+        // Pre-order walk; a leaf keeps its objects in canonical order so the
+        // tree does not depend on the builder's leaf order.
         let mut nodes: Vec<Node> = Vec::with_capacity(bvh.nodes.len());
         let mut order: Vec<u32> = Vec::with_capacity(scene.objects.len());
         // (bvh node, parent id, depth)
@@ -114,6 +133,7 @@ impl Hierarchy {
                     .map(|p| bvh.primitive_indices[p as usize])
                     .collect();
                 objs.sort_unstable();
+                let objs: Vec<u32> = objs.iter().map(|&k| canon[k as usize]).collect();
                 order.extend_from_slice(&objs);
                 node.objects.1 = order.len() as u32;
             } else {
@@ -296,6 +316,35 @@ mod tests {
         h.validate(&scene).unwrap();
         let depth = h.nodes.iter().map(|n| n.depth).max().unwrap();
         assert!(depth < 64, "depth {depth}");
+    }
+
+    /// The tree depends on the objects' geometry, not on their order in
+    /// the scene: a shuffled scene gives the same nodes, holding the same
+    /// objects under their new ids.
+    #[test]
+    fn the_tree_does_not_depend_on_the_object_order() {
+        let scene = grid_scene(300, false);
+        let h = Hierarchy::build(&scene);
+        let n = scene.objects.len();
+        let mut rng = crate::math::rng::Rng::new(7);
+        let mut perm: Vec<usize> = (0..n).collect();
+        for i in (1..n).rev() {
+            perm.swap(i, (rng.next_u64() % (i as u64 + 1)) as usize);
+        }
+        // perm[new] = old.
+        let shuffled = Scene {
+            objects: perm.iter().map(|&o| scene.objects[o].clone()).collect(),
+        };
+        let hs = Hierarchy::build(&shuffled);
+        assert_eq!(h.nodes.len(), hs.nodes.len());
+        for (a, b) in h.nodes.iter().zip(&hs.nodes) {
+            assert_eq!(a.children, b.children);
+            assert_eq!(a.objects, b.objects);
+            assert_eq!(a.sphere.center, b.sphere.center);
+            assert_eq!(a.sphere.radius, b.sphere.radius);
+        }
+        let back: Vec<u32> = hs.order.iter().map(|&o| perm[o as usize] as u32).collect();
+        assert_eq!(h.order, back);
     }
 
     #[test]
