@@ -136,21 +136,24 @@ pub fn run(a: EvaluateArgs) -> Result<ExitCode> {
         eprintln!(
             "{} image views ({} left out, their impostors under {:.1} % of the image), \
              impostors on {:.2} % of the image: over their pixels PSNR mean {:.2} dB \
-             (min {:.2}), mismatch mean {:.4} (max {:.4}); control with magenta layers: \
-             mismatch mean {:.4}",
+             (min {:.2}), footprint mismatch mean {:.4} (p95 {:.4}, max {:.4}); control with \
+             magenta layers: mismatch mean {:.4}",
             report.views,
             report.views_below_coverage,
             100.0 * report.min_coverage,
             100.0 * report.impostor_pixel_fraction,
             report.psnr_db.mean,
             report.psnr_db.min,
-            report.mismatch_fraction.mean,
-            report.mismatch_fraction.max,
+            report.footprint_mismatch_fraction.mean,
+            report.footprint_mismatch_fraction.p95,
+            report.footprint_mismatch_fraction.max,
             report.control_mismatch_fraction.mean
         );
         if report.views == 0 {
             eprintln!("image check: no view shows enough impostor pixels; it proves nothing");
-        } else if report.control_mismatch_fraction.mean <= 2.0 * report.mismatch_fraction.mean {
+        } else if report.control_mismatch_fraction.mean
+            <= 2.0 * report.footprint_mismatch_fraction.mean
+        {
             eprintln!(
                 "image check: the magenta control mismatches hardly more than the impostors; \
                  it proves little"

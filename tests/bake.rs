@@ -86,8 +86,16 @@ fn bake_validates_and_looks_like_the_geometry() {
         "only {views} of 32 views show impostors on 1 % of the image: {image}"
     );
     assert!(f("impostor_pixel_fraction") >= 0.01, "{image}");
-    let mean = image["mismatch_fraction"]["mean"].as_f64().unwrap();
-    let max = image["mismatch_fraction"]["max"].as_f64().unwrap();
+    let mean = image["footprint_mismatch_fraction"]["mean"]
+        .as_f64()
+        .unwrap();
+    let p95 = image["footprint_mismatch_fraction"]["p95"]
+        .as_f64()
+        .unwrap();
+    let max = image["footprint_mismatch_fraction"]["max"]
+        .as_f64()
+        .unwrap();
+    assert!(mean <= p95 && p95 <= max, "{image}");
     assert!(
         mean <= 0.1,
         "mean mismatch {mean} over impostor pixels: {image}"

@@ -181,12 +181,15 @@ pub struct PsnrSpread {
     pub min: f64,
 }
 
-/// Mean and maximum of a per-view mismatch fraction.
+/// Mean, 95th percentile and maximum of a per-view mismatch fraction.
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct MismatchSpread {
     /// Mean over the views.
     pub mean: f64,
+    /// 95th percentile over the views (nearest rank).
+    #[serde(default)]
+    pub p95: f64,
     /// The worst (largest) view.
     pub max: f64,
 }
@@ -233,10 +236,12 @@ pub struct ImageReport {
     /// PSNR over RGB of the impostor pixels, dB (capped at 100 for
     /// identical images).
     pub psnr_db: PsnrSpread,
-    /// Share of the impostor pixels (where the replaced geometry was drawn
-    /// or the layers draw) whose colour has no match within one pixel in
-    /// the other image.
-    pub mismatch_fraction: MismatchSpread,
+    /// Per view, the share of its footprint pixels — the impostor pixels,
+    /// where the replaced geometry was drawn or the layers draw — whose
+    /// colour has no match within one pixel in the other image (formerly
+    /// `mismatch_fraction`).
+    #[serde(alias = "mismatch_fraction")]
+    pub footprint_mismatch_fraction: MismatchSpread,
     /// Share of the image covered by impostor pixels, mean over the
     /// compared views.
     pub impostor_pixel_fraction: f64,

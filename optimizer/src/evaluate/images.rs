@@ -440,7 +440,7 @@ pub fn image_error(
             mean: 100.0,
             min: 100.0,
         },
-        mismatch_fraction: MismatchSpread::default(),
+        footprint_mismatch_fraction: MismatchSpread::default(),
         impostor_pixel_fraction: 0.0,
         control_mismatch_fraction: MismatchSpread::default(),
         worst_view: None,
@@ -525,7 +525,6 @@ pub fn image_error(
     }
     let n = results.len() as f64;
     let mean = |f: fn(&Compared) -> f64| results.iter().map(f).sum::<f64>() / n;
-    let max = |f: fn(&Compared) -> f64| results.iter().map(f).fold(0.0, f64::max);
     let worst = results
         .iter()
         .enumerate()
@@ -537,18 +536,31 @@ pub fn image_error(
         mean: mean(|r| r.psnr),
         min: results.iter().map(|r| r.psnr).fold(f64::INFINITY, f64::min),
     };
-    report.mismatch_fraction = MismatchSpread {
-        mean: mean(|r| r.mismatch),
-        max: max(|r| r.mismatch),
+    let spread = |f: fn(&Compared) -> f64| {
+        let mut v: Vec<f64> = results.iter().map(f).collect();
+        v.sort_by(f64::total_cmp);
+        MismatchSpread {
+            mean: v.iter().sum::<f64>() / n,
+            p95: percentile(&v, 0.95),
+            max: v.last().copied().unwrap_or(0.0),
+        }
     };
-    report.control_mismatch_fraction = MismatchSpread {
-        mean: mean(|r| r.control),
-        max: max(|r| r.control),
-    };
+    report.footprint_mismatch_fraction = spread(|r| r.mismatch);
+    report.control_mismatch_fraction = spread(|r| r.control);
     report.impostor_pixel_fraction = mean(|r| r.coverage);
     report.worst_view = Some(results[worst].worst.clone());
     let pair = results.into_iter().nth(worst).map(|r| r.pair);
     Ok((report, pair))
+}
+
+/// The `q` quantile of ascending `sorted` values by nearest rank (the
+/// smallest value with at least `q` of them at or below it; 0 when empty).
+fn percentile(sorted: &[f64], q: f64) -> f64 {
+    if sorted.is_empty() {
+        return 0.0;
+    }
+    let rank = (q * sorted.len() as f64).ceil() as usize;
+    sorted[rank.clamp(1, sorted.len()) - 1]
 }
 
 /// Where the impostor layers of an image check come from.
@@ -615,6 +627,18 @@ impl ImagePair {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Nearest-rank percentiles, by hand: of 1..=20 the 95th is the 19th
+    /// value, of ten values the largest, of one value itself.
+    #[test]
+    fn percentiles_by_nearest_rank() {
+        let v: Vec<f64> = (1..=20).map(f64::from).collect();
+        assert_eq!(percentile(&v, 0.95), 19.0);
+        assert_eq!(percentile(&v, 0.5), 10.0);
+        assert_eq!(percentile(&v[..10], 0.95), 10.0);
+        assert_eq!(percentile(&[0.25], 0.95), 0.25);
+        assert_eq!(percentile(&[], 0.95), 0.0);
+    }
 
     #[test]
     fn psnr_of_known_difference() {
