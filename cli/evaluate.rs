@@ -150,7 +150,12 @@ pub fn run(a: EvaluateArgs) -> Result<ExitCode> {
             report.control_mismatch_fraction.mean
         );
         if report.views == 0 {
-            eprintln!("image check: no view shows enough impostor pixels; it proves nothing");
+            eprintln!(
+                "image check: no view shows enough impostor pixels; it proves nothing \
+                 (the largest impostor covers at most {:.2} % of a view from the problem \
+                 views that use it)",
+                100.0 * report.largest_impostor_fraction
+            );
         } else if report.control_mismatch_fraction.mean
             <= 2.0 * report.footprint_mismatch_fraction.mean
         {

@@ -245,6 +245,13 @@ pub struct ImageReport {
     /// Share of the image covered by impostor pixels, mean over the
     /// compared views.
     pub impostor_pixel_fraction: f64,
+    /// The largest share of the image any impostor's bounding disc can
+    /// cover from a problem view that uses it (seen from the point of the
+    /// view's region nearest to it, as the cost model counts pixels): an
+    /// upper bound of what one impostor can show. Below `min_coverage`, no
+    /// single impostor can make a view count.
+    #[serde(default)]
+    pub largest_impostor_fraction: f64,
     /// The control: the same views with every layer texel magenta (its
     /// coverage kept). Where it mismatches no more than the impostors, the
     /// check proves nothing about their images.

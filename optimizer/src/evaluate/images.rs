@@ -284,6 +284,31 @@ fn sphere_coverage(
     (covered / cost.screen_px).min(1.0)
 }
 
+/// The largest share of the image one impostor's disc covers from the
+/// problem views that use it: from the point of the CPV's region nearest
+/// to its centre (capped at 1).
+fn largest_impostor_fraction(job: &Job, placement: &Placement) -> f64 {
+    let cost = CostModel::new(job);
+    placement
+        .cpvs
+        .iter()
+        .flat_map(|c| {
+            let (lo, hi) = (
+                DVec3::from_array(c.region.min),
+                DVec3::from_array(c.region.max),
+            );
+            c.impostors.iter().map(move |&k| (lo, hi, k))
+        })
+        .filter_map(|(lo, hi, k)| {
+            let s = &placement.impostors.get(k as usize)?.sphere;
+            let centre = DVec3::from_array(s.center);
+            let d = centre.clamp(lo, hi).distance(centre);
+            Some(cost.pixels(s.radius, d) / cost.screen_px)
+        })
+        .fold(0.0, f64::max)
+        .min(1.0)
+}
+
 /// Draws the views to compare: per view, the candidate (of [`CANDIDATES`])
 /// whose CPV's impostor spheres cover the most of the image.
 fn choose_views(
@@ -442,6 +467,7 @@ pub fn image_error(
         },
         footprint_mismatch_fraction: MismatchSpread::default(),
         impostor_pixel_fraction: 0.0,
+        largest_impostor_fraction: largest_impostor_fraction(job, placement),
         control_mismatch_fraction: MismatchSpread::default(),
         worst_view: None,
     };
@@ -627,6 +653,38 @@ impl ImagePair {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// `largest_impostor_fraction` bounds what one impostor's disc covers
+    /// from any eye in a problem view that uses it, and is reached at the
+    /// region's point nearest to the impostor.
+    #[test]
+    fn largest_impostor_fraction_bounds_every_view() {
+        let scene = crate::testutil::synthetic_city(2, 5, 5);
+        let job = crate::testutil::synthetic_job(5, 5);
+        let p = crate::testutil::place(&scene, &job);
+        assert!(p.summary.impostors > 0);
+        let bound = largest_impostor_fraction(&job, &p);
+        assert!(bound > 0.0 && bound <= 1.0);
+        let cost = CostModel::new(&job);
+        let mut rng = Rng::new(3);
+        let mut reached = 0.0f64;
+        for c in p.cpvs.iter().filter(|c| !c.impostors.is_empty()) {
+            let (lo, hi) = (
+                DVec3::from_array(c.region.min),
+                DVec3::from_array(c.region.max),
+            );
+            for &k in &c.impostors {
+                let s = &p.impostors[k as usize].sphere;
+                let centre = DVec3::from_array(s.center);
+                for eye in [rng.in_box(lo, hi), centre.clamp(lo, hi)] {
+                    let f = cost.pixels(s.radius, eye.distance(centre)) / cost.screen_px;
+                    assert!(f.min(1.0) <= bound, "{f} > {bound}");
+                    reached = reached.max(f.min(1.0));
+                }
+            }
+        }
+        assert_eq!(reached, bound);
+    }
 
     /// Nearest-rank percentiles, by hand: of 1..=20 the 95th is the 19th
     /// value, of ten values the largest, of one value itself.
