@@ -70,7 +70,7 @@ fn bake_validates_and_looks_like_the_geometry() {
         "--views",
         "200",
         "--images",
-        "32",
+        "24",
         "--impostors",
         s(&glb),
         "--dump",
@@ -81,9 +81,12 @@ fn bake_validates_and_looks_like_the_geometry() {
     let image = &e["image"];
     let f = |k: &str| image[k].as_f64().unwrap();
     let views = image["views"].as_u64().unwrap();
+    // Views are chosen for the impostors they show unoccluded: at least
+    // half of them show impostors on 1 % of the image (a third did when
+    // the choice ignored occlusion).
     assert!(
-        views >= 8,
-        "only {views} of 32 views show impostors on 1 % of the image: {image}"
+        views >= 12,
+        "only {views} of 24 views show impostors on 1 % of the image: {image}"
     );
     assert!(f("impostor_pixel_fraction") >= 0.01, "{image}");
     let mean = image["footprint_mismatch_fraction"]["mean"]

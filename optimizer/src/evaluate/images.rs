@@ -7,8 +7,9 @@
 //! pulled towards one of its impostors, and a direction in its direction
 //! interval within the job's pitch range, aimed at that impostor as far as
 //! the interval allows), and the candidate whose impostor spheres cover the
-//! most of the image is rendered. Views close to impostors are where their
-//! errors show.
+//! most of the image is rendered, each sphere weighted by the share of rays
+//! from the eye that reach its cluster's objects before anything else.
+//! Views close to impostors are where their errors show.
 //!
 //! Only the impostor pixels count: those where the replaced geometry is
 //! drawn or the layers draw. A view whose impostor pixels cover less than
@@ -34,6 +35,7 @@ use crate::math::geom::{ViewFrustum, face_direction};
 use crate::math::rng::Rng;
 use crate::model::cost::CostModel;
 use crate::render::raster::{Raster, Surface, TextureRef, Vertex, View};
+use crate::render::raycast::RayCaster;
 use crate::scene::geometry::SceneGeometry;
 use crate::scene::material::Wrap;
 use crate::{Error, Result};
@@ -309,13 +311,49 @@ fn largest_impostor_fraction(job: &Job, placement: &Placement) -> f64 {
         .min(1.0)
 }
 
+/// Rays cast from a candidate view to each impostor in it, to estimate how
+/// much of the impostor is not hidden behind other objects.
+const OCCLUSION_RAYS: usize = 9;
+
+/// The share of the rays from `eye` to points of the sphere's disc (its
+/// centre and eight points at half its radius, across the view line) whose
+/// first hit is one of `objects` (sorted): how much of a cluster is not
+/// hidden behind other objects.
+fn unoccluded(caster: &RayCaster, eye: DVec3, centre: DVec3, radius: f64, objects: &[u32]) -> f64 {
+    let axis = centre - eye;
+    let len = axis.length();
+    if len.is_nan() || len <= 0.0 {
+        return 1.0;
+    }
+    let w = axis / len;
+    let u = if w.x.abs() < 0.9 { DVec3::X } else { DVec3::Y };
+    let (a, b) = (w.cross(u).normalize(), w.cross(w.cross(u)).normalize());
+    let seen = (0..OCCLUSION_RAYS)
+        .filter(|&k| {
+            let target = if k == 0 {
+                centre
+            } else {
+                let t = std::f64::consts::TAU * (k - 1) as f64 / (OCCLUSION_RAYS - 1) as f64;
+                centre + (a * t.cos() + b * t.sin()) * (0.5 * radius)
+            };
+            caster
+                .first_hit(eye, target - eye, 0.0, 2.0)
+                .is_some_and(|h| objects.binary_search(&h.object).is_ok())
+        })
+        .count();
+    seen as f64 / OCCLUSION_RAYS as f64
+}
+
 /// Draws the views to compare: per view, the candidate (of [`CANDIDATES`])
-/// whose CPV's impostor spheres cover the most of the image.
+/// whose CPV's impostor spheres cover the most of the image, each sphere
+/// weighted, when a ray caster is given, by the share of rays to it that
+/// reach its objects unoccluded.
 fn choose_views(
     job: &Job,
     placement: &Placement,
     with_impostors: &[u32],
     opts: &ImageOptions,
+    caster: Option<&RayCaster>,
 ) -> Vec<Chosen> {
     let [w, h] = job.camera.resolution;
     let aspect = f64::from(w) / f64::from(h);
@@ -366,11 +404,21 @@ fn choose_views(
                     continue;
                 }
                 let frustum = ViewFrustum::new(eye, dir, job.camera.fov_deg, aspect);
-                let spheres = cpv.impostors.iter().map(|&k| {
-                    let s = &placement.impostors[k as usize].sphere;
-                    (DVec3::from_array(s.center), s.radius)
-                });
-                let estimate = sphere_coverage(spheres, &frustum, &cost);
+                let estimate: f64 = cpv
+                    .impostors
+                    .iter()
+                    .map(|&k| {
+                        let imp = &placement.impostors[k as usize];
+                        let (c, r) = (DVec3::from_array(imp.sphere.center), imp.sphere.radius);
+                        let disc = sphere_coverage([(c, r)], &frustum, &cost);
+                        match caster {
+                            Some(rc) if disc > 0.0 => {
+                                disc * unoccluded(rc, eye, c, r, &imp.objects)
+                            }
+                            _ => disc,
+                        }
+                    })
+                    .sum();
                 if best.as_ref().is_none_or(|(b, _)| estimate > *b) {
                     best = Some((
                         estimate,
@@ -426,13 +474,15 @@ struct Compared {
 /// that use impostors, over the impostor pixels, with the magenta control.
 /// `layers` gives the layers of the impostors it is asked for (`ids`,
 /// sorted and distinct): rendered from the placement, or read back from a
-/// baked GLB.
+/// baked GLB. With a ray caster over the same geometry, views are chosen
+/// for the impostors they show unoccluded.
 pub fn image_error(
     geom: &SceneGeometry,
     job: &Job,
     placement: &Placement,
     layers: impl FnOnce(&[u32]) -> Result<Vec<Layer>>,
     opts: &ImageOptions,
+    caster: Option<&RayCaster>,
 ) -> Result<(ImageReport, Option<ImagePair>)> {
     if opts.views > 100_000 {
         return Err(Error::bad(
@@ -474,7 +524,7 @@ pub fn image_error(
     if with_impostors.is_empty() || opts.views == 0 {
         return Ok((report, None));
     }
-    let chosen = choose_views(job, placement, &with_impostors, opts);
+    let chosen = choose_views(job, placement, &with_impostors, opts, caster);
     // Only the layers of the impostors the chosen views use.
     let mut ids: Vec<u32> = chosen
         .iter()
@@ -630,7 +680,14 @@ impl Prepared<'_> {
                 crate::bake::read_layers(bytes, name)
             }
         };
-        image_error(geom, self.job(), placement, layers, opts)
+        image_error(
+            geom,
+            self.job(),
+            placement,
+            layers,
+            opts,
+            self.input().caster(),
+        )
     }
 }
 
