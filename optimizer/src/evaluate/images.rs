@@ -3,8 +3,9 @@
 //! view's CPV's impostors swapped in — and compare where the impostors are.
 //!
 //! Views are sampled where impostors are used: per view, candidates are
-//! drawn in CPVs that have impostors (a position in the region, uniform or
-//! pulled towards one of its impostors, and a direction in its direction
+//! drawn in CPVs that have impostors (a position in the region, uniform,
+//! pulled towards one of its impostors or at the region's point nearest to
+//! it, where it is largest, and a direction in its direction
 //! interval within the job's pitch range, aimed at that impostor as far as
 //! the interval allows), and the candidate whose impostor spheres cover the
 //! most of the image is rendered, each sphere weighted by the share of rays
@@ -376,13 +377,15 @@ fn choose_views(
                     DVec3::from_array(cpv.region.min),
                     DVec3::from_array(cpv.region.max),
                 );
-                // Half the candidates are pulled towards the impostor: the
-                // region's nearest point to it, blended with a uniform one.
+                // Half the candidates are pulled towards the impostor: a
+                // quarter at the region's point nearest to it (where it is
+                // largest), a quarter between that point and a uniform one.
                 let uniform = rng.in_box(lo, hi);
-                let eye = if attempt % 2 == 1 {
-                    uniform.lerp(centre.clamp(lo, hi), rng.range(0.0, 1.0))
-                } else {
-                    uniform
+                let nearest = centre.clamp(lo, hi);
+                let eye = match attempt % 4 {
+                    1 => uniform.lerp(nearest, rng.range(0.0, 1.0)),
+                    3 => nearest,
+                    _ => uniform,
                 };
                 let d = &cpv.directions;
                 let (mut u, mut v) = (rng.range(d.u[0], d.u[1]), rng.range(d.v[0], d.v[1]));
