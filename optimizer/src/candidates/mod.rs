@@ -98,8 +98,7 @@ pub fn estimate_served(ctx: &Context, job: &Job, pv: &ProblemViews) -> u64 {
         return 0;
     }
     let method = job.method();
-    let shafts = matches!(method, Method::Shafts | Method::Both | Method::ShaftsPrune);
-    let boxes = matches!(method, Method::Boxes | Method::Both | Method::PerCell);
+    let (shafts, boxes) = (method.builds_shafts(), method.builds_boxes());
     let alphas = half_angles(job);
     let grids: Vec<AxisGrid> = alphas.iter().map(|&a| AxisGrid::new(job, a)).collect();
     let cells = pv.cells();
@@ -166,14 +165,12 @@ pub fn generate(ctx: &Context, job: &Job, pv: &ProblemViews) -> Candidates {
     let h = ctx.hierarchy;
     let imodel = ImpostorModel::new(job);
     let method = job.method();
-    let shafts = matches!(method, Method::Shafts | Method::Both | Method::ShaftsPrune);
-    let boxes = matches!(method, Method::Boxes | Method::Both | Method::PerCell);
+    let (shafts, boxes) = (method.builds_shafts(), method.builds_boxes());
     // Per-cell: one box size only, the cells' ancestors `level` levels up.
     let per_cell = (method == Method::PerCell).then_some(job.per_cell.level);
     let alphas = half_angles(job);
     let grids: Vec<AxisGrid> = alphas.iter().map(|&a| AxisGrid::new(job, a)).collect();
-    let steps = job.candidates.min_distance_steps.max(1);
-    let last_k = job.candidates.min_distance_doublings.saturating_mul(steps);
+    let (steps, last_k) = ladder(job);
 
     // The (cluster → CPVs) pairs, grouped by cell.
     let pairs = Pairs::collect(ctx, pv);
@@ -474,19 +471,30 @@ pub fn generate(ctx: &Context, job: &Job, pv: &ProblemViews) -> Candidates {
     }
 }
 
+/// The minimum-distance ladder of `job`'s shafts: distances per doubling
+/// and the last ladder index.
+fn ladder(job: &Job) -> (u32, u32) {
+    let steps = job.candidates.min_distance_steps.max(1);
+    (
+        steps,
+        job.candidates.min_distance_doublings.saturating_mul(steps),
+    )
+}
+
 /// What view cells a cluster can have from a cell, judged on the smallest
 /// the generator builds for it there (the narrowest shaft at the cell's
 /// distance step; the cell's own box): see [`outlook`].
+/// The discriminants index per-outlook tallies.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Outlook {
     /// No view cell can hold the cell: the cluster's sphere is nearer than
     /// its diameter (shafts) and meets the cell (boxes).
-    TooClose,
+    TooClose = 0,
     /// A view cell can hold the cell, but no impostor of the cluster keeps
     /// the parallax within `max_error_px` (layer cap, texture size).
-    OverErrorBudget,
+    OverErrorBudget = 1,
     /// An impostor exists.
-    Possible,
+    Possible = 2,
 }
 
 /// The [`Outlook`] of the cluster of bounding sphere `sphere` from the cell
@@ -499,8 +507,7 @@ pub fn outlook(
     dist: f64,
 ) -> Outlook {
     let method = job.method();
-    let shafts = matches!(method, Method::Shafts | Method::Both | Method::ShaftsPrune);
-    let boxes = matches!(method, Method::Boxes | Method::Both | Method::PerCell);
+    let (shafts, boxes) = (method.builds_shafts(), method.builds_boxes());
     let size = 2.0 * sphere.radius;
     let shaft_fits = shafts && size > 0.0 && dist >= size;
     let box_fits = boxes && region.distance_to_point(sphere.center) > sphere.radius;
@@ -508,8 +515,7 @@ pub fn outlook(
         return Outlook::TooClose;
     }
     let shaft = || {
-        let steps = job.candidates.min_distance_steps.max(1);
-        let last_k = job.candidates.min_distance_doublings.saturating_mul(steps);
+        let (steps, last_k) = ladder(job);
         let k = ladder_index(size, dist, steps, last_k);
         let alpha = half_angles(job).first().copied()?;
         imodel.shaft(sphere, alpha, ladder_distance(size, k, steps))

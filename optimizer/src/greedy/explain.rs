@@ -39,25 +39,12 @@ impl State<'_> {
                 .into_par_iter()
                 .filter(|&i| !self.fits(i))
                 .map(|i| {
-                    let cand = &self.cands[i as usize];
-                    let s = self.ctx.hierarchy.nodes[cand.node as usize].sphere;
                     let mut out = Vec::new();
-                    for &g in &all.served[cand.served.indices()] {
-                        let gr = all.pairs.group(g);
-                        if self.unsolved_in_cell[gr.kd as usize] == 0 {
-                            continue;
+                    self.for_each_effect(i, true, |c, e| {
+                        if e.accelerates && self.is_unsolved(c) {
+                            out.push(c);
                         }
-                        let imp = self.ctx.model.impostor(cand.spec.layers, s.radius, gr.dist);
-                        for (c, orig) in all.pairs.iter(gr) {
-                            if self.is_unsolved(c)
-                                && self
-                                    .effect(c, cand.node, orig, imp)
-                                    .is_some_and(|e| e.accelerates)
-                            {
-                                out.push(c);
-                            }
-                        }
-                    }
+                    });
                     out
                 })
                 .collect();
@@ -94,12 +81,7 @@ impl State<'_> {
                             let region = self.pv.cpvs[c as usize].region;
                             outlook(job, &imodel, &sphere, &region, gr.dist)
                         });
-                        let k = match o {
-                            Outlook::TooClose => 0,
-                            Outlook::OverErrorBudget => 1,
-                            Outlook::Possible => 2,
-                        };
-                        out.push((c, k, orig.cpu + orig.gpu));
+                        out.push((c, o as usize, orig.cpu + orig.gpu));
                     }
                 }
                 out
@@ -113,12 +95,11 @@ impl State<'_> {
             if !self.is_unsolved(c) || reasons[c as usize].is_some() {
                 continue;
             }
-            let [close, error, _] = weight[c as usize];
             let w = weight[c as usize];
             let heaviest = (0..3).fold(0, |b, k| if w[k] > w[b] { k } else { b });
             reasons[c as usize] = Some(match heaviest {
-                0 if close > 0.0 => UnsolvedReason::ClusterContainsRegion,
-                1 if error > 0.0 => UnsolvedReason::NoCandidateMeetsMaxErrorPx,
+                0 if w[0] > 0.0 => UnsolvedReason::ClusterContainsRegion,
+                1 => UnsolvedReason::NoCandidateMeetsMaxErrorPx,
                 _ => UnsolvedReason::ImpostorsNotFaster,
             });
         }

@@ -336,13 +336,17 @@ impl<'a> State<'a> {
         saved.min(excess).max(0.0)
     }
 
-    /// Calls `f(cpv, effect)` for every CPV candidate `i` may serve.
-    fn for_each_effect(&self, i: u32, mut f: impl FnMut(u32, Effect)) {
+    /// Calls `f(cpv, effect)` for every CPV candidate `i` may serve (only
+    /// in cells with CPVs above `t_max` when `unsolved_cells_only`).
+    fn for_each_effect(&self, i: u32, unsolved_cells_only: bool, mut f: impl FnMut(u32, Effect)) {
         let all = self.all;
         let cand = &self.cands[i as usize];
         let s = self.ctx.hierarchy.nodes[cand.node as usize].sphere;
         for &g in &all.served[cand.served.indices()] {
             let gr = all.pairs.group(g);
+            if unsolved_cells_only && self.unsolved_in_cell[gr.kd as usize] == 0 {
+                continue;
+            }
             // All CPVs of a group share their region, hence the impostor's cost.
             let imp = self.ctx.model.impostor(cand.spec.layers, s.radius, gr.dist);
             for (c, orig) in all.pairs.iter(gr) {
@@ -513,7 +517,7 @@ impl<'a> State<'a> {
             self.spent += self.cands[i as usize].spec.memory_bytes;
         }
         let mut changes: Vec<(u32, Cost, Cost)> = Vec::new();
-        self.for_each_effect(i, |c, e| {
+        self.for_each_effect(i, false, |c, e| {
             if e.accelerates {
                 changes.push((c, e.new_cost, e.saving));
             }

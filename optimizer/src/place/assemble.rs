@@ -1,9 +1,9 @@
 //! The placement JSON of a selection: impostors with their view cells and
 //! the problem views with their final times.
 
-use crate::api::job::Job;
 use std::collections::BTreeMap;
 
+use crate::api::job::Job;
 use crate::api::placement::{
     DirectionsJson, PlacedCpv, PlacedImpostor, Placement, RegionJson, SphereJson, Summary,
     UnsolvedReason, ViewCellJson,

@@ -294,6 +294,15 @@ fn one_run<'a>(
     Ok((out.run, out.frames))
 }
 
+/// A run's outcome, with a refused or cancelled run recorded as failed
+/// (no frames); any other error stops the report.
+fn or_failed(job: &Job, r: Result<(Run, Option<Vec<f64>>)>) -> Result<(Run, Option<Vec<f64>>)> {
+    match r {
+        Err(e @ (Error::BadInput { .. } | Error::Cancelled)) => Ok((failed(job, &e), None)),
+        r => r,
+    }
+}
+
 fn failed(job: &Job, e: &Error) -> Run {
     Run {
         method: job.method().name().into(),
@@ -380,20 +389,14 @@ pub fn run(
         })?;
         let is_target = setting.as_ref().is_some_and(|(k, _)| k == TARGET);
         let walk = is_target || (!has_target_sweep && setting.is_none());
-        let mut run = match one_run(&mut preps, input, job, opts.views, walk) {
-            Ok((run, frames)) => {
-                if let Some(frame_ms) = frames {
-                    walkthroughs.push(Walkthrough {
-                        method: job.method().name().into(),
-                        target_frame_time_ms: job.target_frame_time_ms,
-                        frame_ms,
-                    });
-                }
-                run
-            }
-            Err(e @ (Error::BadInput { .. } | Error::Cancelled)) => failed(job, &e),
-            Err(e) => return Err(e),
-        };
+        let (mut run, frames) = or_failed(job, one_run(&mut preps, input, job, opts.views, walk))?;
+        if let Some(frame_ms) = frames {
+            walkthroughs.push(Walkthrough {
+                method: job.method().name().into(),
+                target_frame_time_ms: job.target_frame_time_ms,
+                frame_ms,
+            });
+        }
         if let Some((k, v)) = setting {
             run.knob = Some(k.clone());
             run.value = Some(*v);
@@ -415,11 +418,7 @@ pub fn run(
             j.method = Some(m);
             j.memory.budget_bytes = Some(budget);
             step(&format!("{} budget {:.0} %", m.name(), f * 100.0))?;
-            let mut run = match one_run(&mut preps, input, &j, opts.views, false) {
-                Ok((run, _)) => run,
-                Err(e @ (Error::BadInput { .. } | Error::Cancelled)) => failed(&j, &e),
-                Err(e) => return Err(e),
-            };
+            let (mut run, _) = or_failed(&j, one_run(&mut preps, input, &j, opts.views, false))?;
             run.knob = Some(BUDGET.into());
             run.value = Some(budget as f64);
             runs.push(run);

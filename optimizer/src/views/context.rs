@@ -5,6 +5,8 @@
 
 use std::sync::atomic::{AtomicU64, Ordering};
 
+use glam::DVec3;
+
 use crate::api::job::Job;
 use crate::api::stats::{LodReport, LodStats};
 use crate::control::Control;
@@ -70,6 +72,12 @@ impl<'a> Context<'a> {
     pub fn pitch_overlaps(&self, vdi: &Vdi) -> bool {
         let [lo, hi] = vdi.elevation_range();
         hi >= self.pitch[0] - 1e-12 && lo <= self.pitch[1] + 1e-12
+    }
+
+    /// True when the unit direction `d` lies in the pitch range.
+    pub fn in_pitch(&self, d: DVec3) -> bool {
+        let pitch = d.y.clamp(-1.0, 1.0).asin();
+        pitch >= self.pitch[0] && pitch <= self.pitch[1]
     }
 }
 

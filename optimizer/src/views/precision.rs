@@ -38,8 +38,7 @@ fn sample_direction(
     (0..tries).find_map(|_| {
         let (u, v) = (rng.range(u0, u1), rng.range(v0, v1));
         let d = face_direction(cpv.vdi.face, u, v).normalize();
-        let pitch = d.y.clamp(-1.0, 1.0).asin();
-        (pitch >= ctx.pitch[0] && pitch <= ctx.pitch[1]).then_some((d, [u, v]))
+        ctx.in_pitch(d).then_some((d, [u, v]))
     })
 }
 
@@ -94,8 +93,7 @@ pub fn slowest_view_search(
     let high = [hi.x, hi.y, hi.z, u1, v1];
     let time = |p: &[f64; 5]| -> Option<f64> {
         let d = face_direction(cpv.vdi.face, p[3], p[4]).normalize();
-        let pitch = d.y.clamp(-1.0, 1.0).asin();
-        (pitch >= ctx.pitch[0] && pitch <= ctx.pitch[1])
+        ctx.in_pitch(d)
             .then(|| exact_view_time(ctx, visible.as_deref(), DVec3::new(p[0], p[1], p[2]), d))
     };
     let mut best: Option<(f64, [f64; 5])> = None;

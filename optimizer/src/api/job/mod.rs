@@ -116,6 +116,17 @@ impl Method {
         }
     }
 
+    /// Whether the method's candidates include shafts.
+    pub fn builds_shafts(self) -> bool {
+        matches!(self, Method::Shafts | Method::Both | Method::ShaftsPrune)
+    }
+
+    /// Whether the method's candidates include boxes of the view-space
+    /// hierarchy (`per-cell`: its one box level).
+    pub fn builds_boxes(self) -> bool {
+        matches!(self, Method::Boxes | Method::Both | Method::PerCell)
+    }
+
     /// The method of a name.
     pub fn parse(name: &str) -> Option<Method> {
         Method::ALL.into_iter().find(|m| m.name() == name)
