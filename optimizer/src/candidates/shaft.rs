@@ -327,7 +327,7 @@ mod tests {
     fn distinct_corners_are_shared_between_neighbouring_cells() {
         // A 3 x 2 x 1 row of grid cells: 4 x 3 x 2 distinct corners.
         let (lo, hi) = (DVec3::new(0.3, 1.5, 0.7), DVec3::new(70.1, 5.0, 47.3));
-        let grid = crate::math::grid::Grid::new(lo, hi, 23.3);
+        let grid = crate::math::grid::Grid::new(lo, hi, 23.3, DVec3::ZERO);
         let cells: Vec<Aabb> = (0..3)
             .flat_map(|x| (0..2).map(move |z| (x, z)))
             .map(|(x, z)| grid.cell_box([x, 0, z], [x + 1, 1, z + 1]))

@@ -30,6 +30,9 @@ pub(super) struct PlacementIndex {
     cpv_impostors: Vec<Vec<u32>>,
     /// Per CPV: solved (its final time within the target).
     pub(super) cpv_solved: Vec<bool>,
+    /// Per CPV: its region (its cell, or the part of it where its views may
+    /// exceed the target).
+    cpv_region: Vec<Aabb>,
     lookup: HashMap<(u32, Vdi), u32>,
     /// The job's grid.
     pub(super) grid: Grid,
@@ -65,6 +68,7 @@ impl PlacementIndex {
         let mut cpv_replaced = Vec::with_capacity(placement.cpvs.len());
         let mut cpv_impostors = Vec::with_capacity(placement.cpvs.len());
         let mut cpv_solved = Vec::with_capacity(placement.cpvs.len());
+        let mut cpv_region = Vec::with_capacity(placement.cpvs.len());
         for (k, c) in placement.cpvs.iter().enumerate() {
             let what = format!("{source}: cpvs[{k}]");
             let region = Aabb::new(
@@ -74,13 +78,19 @@ impl PlacementIndex {
             let cell = grid
                 .cell_of(region.center())
                 .ok_or_else(|| Error::bad(&what, "region lies outside the job's view space"))?;
+            // A problem view's region is its grid cell or the part of it
+            // where its views may exceed the target.
             let expect = grid.cell_box(cell, cell.map(|i| i + 1));
-            if expect.min.distance(region.min) + expect.max.distance(region.max)
-                > 1e-6 * (1.0 + expect.half_diagonal())
-            {
+            let tol = 1e-6 * (1.0 + expect.half_diagonal());
+            let inside = (0..3).all(|a| {
+                region.min[a] >= expect.min[a] - tol
+                    && region.max[a] <= expect.max[a] + tol
+                    && region.min[a] <= region.max[a]
+            });
+            if !inside {
                 return Err(Error::bad(
                     &what,
-                    "region is not a cell of the job's view space grid: the placement does not match the job",
+                    "region does not lie in a cell of the job's view space grid: the placement does not match the job",
                 ));
             }
             let d = &c.directions;
@@ -111,29 +121,38 @@ impl PlacementIndex {
             cpv_replaced.push(replaced);
             cpv_impostors.push(c.impostors.clone());
             cpv_solved.push(c.time_ms_final <= job.target_frame_time_ms && c.solved);
+            cpv_region.push(region);
         }
         Ok(PlacementIndex {
             impostors,
             cpv_replaced,
             cpv_impostors,
             cpv_solved,
+            cpv_region,
             lookup,
             grid,
             level,
         })
     }
 
-    /// The CPV of a view (its cell and direction), with the objects its
-    /// impostors replace and the impostors; empty lists outside CPVs.
-    pub(super) fn view_cpv(&self, cell: [u32; 3], dir: DVec3) -> (Option<u32>, &[u32], &[u32]) {
+    /// The CPV of a view (its eye, the eye's cell and the direction), with
+    /// the objects its impostors replace and the impostors; empty lists
+    /// outside CPVs (including the parts of a cell outside its CPVs'
+    /// regions, where no view exceeds the target).
+    pub(super) fn view_cpv(
+        &self,
+        eye: DVec3,
+        cell: [u32; 3],
+        dir: DVec3,
+    ) -> (Option<u32>, &[u32], &[u32]) {
         let vdi = Vdi::containing(dir, self.level);
         match self.lookup.get(&(self.grid.linear(cell), vdi)).copied() {
-            Some(c) => (
+            Some(c) if self.cpv_region[c as usize].contains_point(eye) => (
                 Some(c),
                 &self.cpv_replaced[c as usize],
                 &self.cpv_impostors[c as usize],
             ),
-            None => (None, &[], &[]),
+            _ => (None, &[], &[]),
         }
     }
 }

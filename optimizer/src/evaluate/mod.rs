@@ -142,7 +142,7 @@ impl Viewer<'_> {
             .grid
             .cell_of(eye)
             .expect("sampled inside the view space");
-        let (cpv, replaced, imps) = index.view_cpv(cell, dir);
+        let (cpv, replaced, imps) = index.view_cpv(eye, cell, dir);
         let outside = imps
             .iter()
             .any(|&i| !index.impostors[i as usize].cell.contains_point(eye));

@@ -89,7 +89,7 @@ impl Prepared<'_> {
                 let Some(cell) = index.grid.cell_of(eye) else {
                     return f64::NAN;
                 };
-                let (_, replaced, imps) = index.view_cpv(cell, dir);
+                let (_, replaced, imps) = index.view_cpv(eye, cell, dir);
                 let set = self.visibility().map(|v| &v.cell(cell).set);
                 view_time(
                     scene,

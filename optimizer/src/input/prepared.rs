@@ -76,6 +76,7 @@ impl<'a> Prepared<'a> {
         let a = &self.job;
         a.view_space == job.view_space
             && a.problem_views.cell_size == job.problem_views.cell_size
+            && a.problem_views.grid_origin == job.problem_views.grid_origin
             && a.visibility == job.visibility
     }
 

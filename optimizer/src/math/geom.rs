@@ -25,6 +25,16 @@ impl Aabb {
         Aabb { min, max }
     }
 
+    /// The smallest box holding both.
+    pub fn union(&self, o: &Aabb) -> Aabb {
+        Aabb::new(self.min.min(o.min), self.max.max(o.max))
+    }
+
+    /// True when `p` lies in the box (its faces included).
+    pub fn contains_point(&self, p: DVec3) -> bool {
+        p.cmpge(self.min).all() && p.cmple(self.max).all()
+    }
+
     /// Centre.
     pub fn center(&self) -> DVec3 {
         (self.min + self.max) * 0.5

@@ -36,9 +36,9 @@ struct CellMaps {
 /// Grid cells per environment-map cell, per axis.
 fn block(job: &Job, pv: &ProblemViews) -> [u32; 3] {
     let g = &pv.grid;
-    let cell = g.cell_box([0; 3], [1; 3]);
+    let cell = g.largest_cell();
     [0, 1, 2].map(|a| {
-        let ext = cell.max[a] - cell.min[a];
+        let ext = cell[a];
         if ext <= 0.0 {
             g.counts[a]
         } else {

@@ -457,16 +457,16 @@ pub fn run(
                 step(&format!("{} stability: {label}", m.name()))?;
                 record(label, one_run(&mut preps, input, &p, views, false));
             }
-            // The grid shifted by half a cell (the view space grows by half
-            // a cell at its low side along x and z).
-            let mut p = j.clone();
-            let half = 0.5 * p.problem_views.cell_size;
-            p.view_space.min[0] -= half;
-            p.view_space.min[2] -= half;
+            // The grid's planes shifted by half a cell along x and z (its
+            // phase against the scene; the view space stays as it is).
+            let mut shifted = j.clone();
+            let half = 0.5 * j.problem_views.cell_size;
+            shifted.problem_views.grid_origin[0] += half;
+            shifted.problem_views.grid_origin[2] += half;
             step(&format!("{} stability: grid shifted", m.name()))?;
             record(
                 "grid shifted by half a cell".into(),
-                one_run(&mut preps, input, &p, views, false),
+                one_run(&mut preps, input, &shifted, views, false),
             );
             for seed in [1u64, 2] {
                 step(&format!("{} stability: objects shuffled", m.name()))?;

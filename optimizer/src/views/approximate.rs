@@ -123,12 +123,151 @@ fn proven_by_refinement(
     true
 }
 
-/// The quadtree level of minimum-size VDIs and how many levels below it
-/// problem views are refined.
+/// The halves of `b` along each axis at least half as long as its longest
+/// (2, 4 or 8 boxes), in a fixed order.
+fn halves(b: &Aabb) -> Vec<Aabb> {
+    let ext = b.max - b.min;
+    let longest = ext.max_element();
+    let c = b.center();
+    let mut out = vec![*b];
+    for a in 0..3 {
+        if ext[a] < 0.5 * longest || ext[a] <= 0.0 {
+            continue;
+        }
+        out = out
+            .into_iter()
+            .flat_map(|x| {
+                let (mut lo, mut hi) = (x, x);
+                lo.max[a] = c[a];
+                hi.min[a] = c[a];
+                [lo, hi]
+            })
+            .collect();
+    }
+    out
+}
+
+/// Adds to `acc` every part of `region`, halved `depth` times, from which
+/// some view in `vdi` may exceed the target (parts proven by
+/// [`proven_by_refinement`] left out), and sets `found` when there is one.
+/// A part already inside `acc` is looked at only while `found` is unset: it
+/// cannot grow `acc`, so once the VDI is known to keep a problem it is
+/// skipped, and `acc` and `found` end as if every part had been tested.
+/// The costs stay the cell's (closest distances, levels of detail and the
+/// visible set of the whole cell), which are conservative for its parts.
+/// The parts of `region` halved `depth` times (see [`halves`]), in order.
+fn leaves(region: &Aabb, depth: u8) -> Vec<Aabb> {
+    let mut out = vec![*region];
+    for _ in 0..depth {
+        out = out.iter().flat_map(halves).collect();
+    }
+    out
+}
+
+/// What the search for a cell's unproven parts keeps from one problem view
+/// to the next: the smallest box holding every unproven part so far and the
+/// last unproven part found (often unproven for the next VDI too), and, for
+/// the VDI at hand, the parts already proven.
+#[derive(Default)]
+struct Parts {
+    union: Option<Aabb>,
+    last: Option<Aabb>,
+    proven: Vec<Aabb>,
+}
+
+impl Parts {
+    fn covers(&self, b: &Aabb) -> bool {
+        self.union.is_some_and(|a| a.contains_box(b))
+    }
+
+    fn record(&mut self, part: Aabb) {
+        self.last = Some(part);
+        self.union = Some(self.union.map_or(part, |a| a.union(&part)));
+    }
+
+    /// Adds every part of `region` (the cell), halved `levels.split` times, from
+    /// which some view in `vdi` may exceed the target (parts proven by
+    /// [`proven_by_refinement`] left out); true when there is one, false
+    /// when every part is proven and the VDI can be dropped.
+    ///
+    /// Once the union of unproven parts is the whole cell, a VDI is kept
+    /// untested (splitting could only drop it: conservative). Otherwise the
+    /// last unproven part and the cell's corner parts are tried first, so
+    /// that the union spans the cell after a few tests where the problem is
+    /// real; then a part inside the union is skipped once the VDI is known
+    /// to keep a problem (it cannot grow the union).
+    fn add(
+        &mut self,
+        ctx: &Context,
+        costs: &RegionCosts,
+        region: &Aabb,
+        vdi: &Vdi,
+        levels: Levels,
+        cones: &mut u64,
+    ) -> bool {
+        let (refine, depth) = (levels.refine, levels.split);
+        if self.covers(region) {
+            return true;
+        }
+        self.proven.clear();
+        let mut found = false;
+        let corners = leaves(region, depth)
+            .into_iter()
+            .filter(|p| (0..3).all(|a| p.min[a] == region.min[a] || p.max[a] == region.max[a]));
+        for part in self.last.into_iter().chain(corners) {
+            if (found && self.covers(&part)) || self.proven.contains(&part) {
+                continue;
+            }
+            if proven_by_refinement(ctx, costs, &part, vdi, refine, cones) {
+                self.proven.push(part);
+            } else {
+                found = true;
+                self.record(part);
+            }
+        }
+        self.walk(ctx, costs, region, vdi, refine, depth, &mut found, cones);
+        found
+    }
+
+    #[allow(clippy::too_many_arguments)]
+    fn walk(
+        &mut self,
+        ctx: &Context,
+        costs: &RegionCosts,
+        region: &Aabb,
+        vdi: &Vdi,
+        refine: u8,
+        depth: u8,
+        found: &mut bool,
+        cones: &mut u64,
+    ) {
+        for part in halves(region) {
+            if *found && self.covers(&part) {
+                continue;
+            }
+            if depth == 1 && self.proven.contains(&part) {
+                continue;
+            }
+            if proven_by_refinement(ctx, costs, &part, vdi, refine, cones) {
+                continue;
+            }
+            if depth > 1 {
+                self.walk(ctx, costs, &part, vdi, refine, depth - 1, found, cones);
+            } else {
+                *found = true;
+                self.record(part);
+            }
+        }
+    }
+}
+
+/// The quadtree level of minimum-size VDIs, how many levels below it
+/// problem views are refined, and how many times a problem cell is halved.
 #[derive(Clone, Copy)]
 struct Levels {
     leaf: u8,
     refine: u8,
+    split: u8,
 }
 
 fn process(
@@ -174,10 +313,22 @@ fn process(
             problems.retain(|vdi| {
                 !proven_by_refinement(ctx, &costs, &region, vdi, levels.refine, &mut cones)
             });
+            // The cell's parts (halved twice) where each remaining problem
+            // view may still exceed the target: the CPVs of the cell share
+            // the smallest box holding them all, so where a problem ends
+            // inside a cell the grid's phase matters less.
+            // The cell's parts where each remaining problem view may still
+            // exceed the target; the CPVs of the cell share the smallest box
+            // holding them all as their region.
+            let mut parts = Parts::default();
+            if levels.refine > 0 && levels.split > 0 {
+                problems.retain(|vdi| parts.add(ctx, &costs, &region, vdi, levels, &mut cones));
+            }
             let refined = before - problems.len() as u64;
             if problems.is_empty() {
                 return RegionResult::empty(cones, 1, refined);
             }
+            let region = parts.union.unwrap_or(region);
             // Each CPV keeps only how many clusters it lists; the lists are
             // counted per cluster here and computed again, a cell at a
             // time, by candidate generation.
@@ -264,6 +415,7 @@ pub fn approximate(ctx: &Context, job: &Job, counters: &Counters) -> ProblemView
     let levels = Levels {
         leaf: level,
         refine: job.problem_views.refine_levels,
+        split: job.problem_views.split_levels,
     };
     let res = process(ctx, counters, &kd, 0, &all, levels);
     ProblemViews {

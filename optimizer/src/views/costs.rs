@@ -152,32 +152,45 @@ pub fn enclosed_cost(
 }
 
 /// True when the objects whose spheres meet `cone` cost more than the
-/// target frame time: the walk stops as soon as the sum so far exceeds it
-/// (the frame time grows with every cost added).
+/// target frame time. The walk stops as soon as the sum so far exceeds it
+/// (the frame time grows with every cost added), or as soon as the sum so
+/// far plus the whole costs of the clusters still to visit (at most what
+/// they can add) stays below it by a margin that covers the rounding of
+/// that running bound: both answers are the full walk's.
 pub fn exceeds_target(ctx: &Context, costs: &RegionCosts, cone: &Enclosing) -> bool {
     let h = ctx.hierarchy;
+    let model = &ctx.model;
     let mut sum = Cost::default();
+    // The whole costs of the clusters on the stack.
+    let mut pending = costs.nodes[0];
+    let margin = 1e-9 * model.frame_time(pending).abs().max(1.0);
     let mut stack = vec![(0u32, cone.all_bounds())];
     while let Some((n, mask)) = stack.pop() {
-        if costs.nodes[n as usize] == Cost::default() {
+        let whole = costs.nodes[n as usize];
+        pending = pending - whole;
+        if whole == Cost::default() {
             continue;
         }
         let node = &h.nodes[n as usize];
         let s = node.sphere;
         match cone.classify_within(s.center, s.radius, mask) {
-            (Overlap::Outside, _) => continue,
-            (Overlap::Inside, _) => sum += costs.nodes[n as usize],
+            (Overlap::Outside, _) => {}
+            (Overlap::Inside, _) => sum += whole,
             (Overlap::Partial, left) => match node.children {
                 None => sum += leaf_cost(ctx, costs, cone, n, left),
                 Some([l, r]) => {
                     stack.push((r, left));
                     stack.push((l, left));
+                    pending += costs.nodes[l as usize] + costs.nodes[r as usize];
                     continue;
                 }
             },
         }
-        if ctx.model.frame_time(sum) > ctx.t_max {
+        if model.frame_time(sum) > ctx.t_max {
             return true;
+        }
+        if model.frame_time(sum + pending) + margin < ctx.t_max {
+            return false;
         }
     }
     false

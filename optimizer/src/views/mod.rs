@@ -7,7 +7,10 @@
 //! angle down to `min_vdi_deg`. A (region, VDI) whose enclosing-frustum time
 //! `t_enc` is within `t_max` is proven; otherwise the VDI is split, and at the
 //! minimum VDI size the region is split. A problem VDI of a minimum-size
-//! region is a conservative problem view (CPV). Regions are processed in
+//! region is a conservative problem view (CPV), unless refining its
+//! directions (`refine_levels`) and halving its cell (`split_levels`) proves
+//! every part of it; its region is then the box of the unproven parts (with
+//! the whole cell's costs, conservative for its parts). Regions are processed in
 //! parallel; results are collected in kd order, so the output does not depend
 //! on the thread count.
 
@@ -40,13 +43,16 @@ pub struct KdNode {
     pub parent: u32,
 }
 
-/// A conservative problem view: a minimum-size region and a minimum-size VDI
-/// whose enclosing-frustum time exceeds `t_max`.
+/// A conservative problem view: a region inside a minimum-size cell and a
+/// minimum-size VDI whose enclosing-frustum time exceeds `t_max`.
 #[derive(Clone, Debug)]
 pub struct Cpv {
     /// The kd leaf (cell) of the region.
     pub kd: u32,
-    /// The 3D region.
+    /// The 3D region: the cell, or (with `problem_views.split_levels`) the
+    /// smallest box holding the parts of it where some view of the cell's
+    /// CPVs may exceed the target; every CPV of a cell has the same region.
+    /// Views of the cell outside it are proven within the target.
     pub region: Aabb,
     /// The view-direction interval.
     pub vdi: Vdi,
@@ -334,6 +340,78 @@ mod tests {
             "every coarse CPV is real: nothing to refine"
         );
         assert!(p_fine >= p_coarse, "{p_fine} < {p_coarse}");
+    }
+
+    /// Halving problem cells only drops problem views and shrinks regions
+    /// where no view exceeds the target: the CPVs of a cell share one region
+    /// inside the cell; every quarter (in x and z) of a cell that the region
+    /// leaves out holds no sampled exact view over the target (searched for
+    /// its slowest view), while the regions themselves do hold such views
+    /// (so the search could have failed).
+    #[test]
+    fn split_regions_leave_out_only_views_within_the_target() {
+        let scene = crate::testutil::synthetic_city(5, 6, 6);
+        let mut job = crate::testutil::synthetic_job(6, 6);
+        // A target where some cells hold problems in part of them only.
+        job.target_frame_time_ms = 8.0;
+        let h = Hierarchy::build(&scene);
+        job.problem_views.split_levels = 0;
+        let ctx = Context::new(&scene, &h, None, &job, Control::default());
+        let whole = approximate(&ctx, &job, &Counters::new());
+        job.problem_views.split_levels = 2;
+        let split = approximate(&ctx, &job, &Counters::new());
+        let before: std::collections::HashSet<(u32, Vdi)> =
+            whole.cpvs.iter().map(|c| (c.kd, c.vdi)).collect();
+        assert!(
+            split.cpvs.len() < whole.cpvs.len(),
+            "splitting dropped nothing"
+        );
+        assert!(split.cpvs.iter().all(|c| before.contains(&(c.kd, c.vdi))));
+        let mut shrunk = 0;
+        let mut real = 0;
+        let mut cells: std::collections::HashMap<u32, Aabb> = Default::default();
+        for (i, c) in split.cpvs.iter().enumerate() {
+            let cell = split.kd[c.kd as usize].aabb;
+            assert!(cell.contains_box(&c.region), "{c:?}");
+            assert_eq!(*cells.entry(c.kd).or_insert(c.region), c.region);
+            if i % 4 == 0 {
+                let worst =
+                    slowest_view_search(&ctx, &split, c, job.target_frame_time_ms, i as u64);
+                real += usize::from(worst > job.target_frame_time_ms);
+            }
+            if c.region == cell {
+                continue;
+            }
+            shrunk += 1;
+            let (lo, hi) = (cell.min, cell.max);
+            for (x, z) in (0..4).flat_map(|x| (0..4).map(move |z| (x, z))) {
+                let at = |a: f64, b: f64, k: u32| a + (b - a) * f64::from(k) / 4.0;
+                let quarter = Aabb::new(
+                    DVec3::new(at(lo.x, hi.x, x), lo.y, at(lo.z, hi.z, z)),
+                    DVec3::new(at(lo.x, hi.x, x + 1), hi.y, at(lo.z, hi.z, z + 1)),
+                );
+                let c2 = &c.region;
+                let overlaps = (0..3).all(|a| {
+                    quarter.min[a] < c2.max[a] && c2.min[a] < quarter.max[a]
+                        || quarter.min[a] == quarter.max[a]
+                });
+                if overlaps {
+                    continue;
+                }
+                let left_out = Cpv {
+                    region: quarter,
+                    ..c.clone()
+                };
+                let worst = slowest_view_search(&ctx, &split, &left_out, f64::INFINITY, i as u64);
+                assert!(
+                    worst <= job.target_frame_time_ms,
+                    "CPV {i}: {worst} ms in {quarter:?}, outside its region {:?}",
+                    c.region
+                );
+            }
+        }
+        assert!(shrunk > 0, "no region was smaller than its cell");
+        assert!(real > 0, "no region holds a view over the target");
     }
 
     /// The search for a CPV's slowest view finds at least what uniform

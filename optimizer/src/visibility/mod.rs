@@ -179,8 +179,10 @@ impl<'a> Visibility<'a> {
     ) -> Result<Option<Visibility<'a>>> {
         let params = &job.visibility;
         let grid = job.grid();
-        let cell = grid.cell_box([0; 3], [1; 3]);
-        let cell_ext = cell.max - cell.min;
+        // Sampled for the largest cell; smaller (edge) cells get the same
+        // sample counts, so finer spacing, and the occluders' shrinking
+        // stays conservative for them.
+        let cell_ext = grid.largest_cell();
         let missing = |what: &str| {
             Error::bad(
                 "visibility",

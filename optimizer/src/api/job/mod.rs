@@ -345,6 +345,26 @@ pub struct ProblemViewParams {
     /// refinement off. Default 3, at most 4.
     #[serde(default = "default_refine_levels")]
     pub refine_levels: u8,
+    /// How many times a problem cell is halved (along its sides at least
+    /// half as long as its longest) to find where its problem views may
+    /// exceed the target: parts proven within the target (with the
+    /// directions refined `refine_levels` levels) are left out, a problem
+    /// view all of whose parts are proven is dropped, and the CPVs of a cell
+    /// get the smallest box holding its unproven parts as their region.
+    /// Needs `refine_levels` above 0; 0 turns it off (regions are cells).
+    /// Default 2, at most 3.
+    #[serde(default = "default_split_levels")]
+    pub split_levels: u8,
+    /// Where the cell grid is anchored, metres: cell boundaries lie at
+    /// `grid_origin + k·cell_size` on each axis (clipped to the view space),
+    /// so a view space grown or shrunk at one side keeps its other cells.
+    /// Default `[0, 0, 0]`.
+    #[serde(default, skip_serializing_if = "is_zero3")]
+    pub grid_origin: [f64; 3],
+}
+
+fn is_zero3(v: &[f64; 3]) -> bool {
+    *v == [0.0; 3]
 }
 
 /// Which view-cell shapes make candidates.
@@ -453,6 +473,10 @@ fn default_cell_size() -> f64 {
 fn default_min_vdi() -> f64 {
     11.25
 }
+fn default_split_levels() -> u8 {
+    2
+}
+
 fn default_refine_levels() -> u8 {
     3
 }
@@ -545,6 +569,8 @@ impl Default for ProblemViewParams {
             cell_size: default_cell_size(),
             min_vdi_deg: default_min_vdi(),
             refine_levels: default_refine_levels(),
+            split_levels: default_split_levels(),
+            grid_origin: [0.0; 3],
         }
     }
 }
@@ -656,10 +682,15 @@ impl Job {
         DVec3::from_array(self.view_space.max)
     }
 
-    /// The grid of minimum cells over the view space: `ceil(extent /
-    /// cell_size)` cells per axis (at least 1).
+    /// The grid of minimum cells over the view space: boundaries at
+    /// `grid_origin + k·cell_size` inside it (at least 1 cell per axis).
     pub fn grid(&self) -> Grid {
-        Grid::new(self.vs_min(), self.vs_max(), self.problem_views.cell_size)
+        Grid::new(
+            self.vs_min(),
+            self.vs_max(),
+            self.problem_views.cell_size,
+            DVec3::from_array(self.problem_views.grid_origin),
+        )
     }
 
     /// Angle one pixel subtends at the screen centre, radians:
@@ -686,6 +717,7 @@ mod tests {
         assert_eq!(j.problem_views.cell_size, 23.0);
         assert_eq!(j.problem_views.min_vdi_deg, 11.25);
         assert_eq!(j.problem_views.refine_levels, 3);
+        assert_eq!(j.problem_views.split_levels, 2);
         assert_eq!(j.candidates.apex_angles_deg, vec![11.25, 22.5, 45.0, 90.0]);
         assert_eq!(j.candidates.min_distance_doublings, 10);
         // The one departure: four minimum distances per doubling (the paper: 1).
@@ -734,6 +766,18 @@ mod tests {
             (
                 r#"{"view_space":{"min":[0,0,0],"max":[1,1,1]},"problem_views":{"refine_levels":5}}"#,
                 "problem_views.refine_levels",
+            ),
+            (
+                r#"{"view_space":{"min":[0,0,0],"max":[1,1,1]},"problem_views":{"split_levels":4}}"#,
+                "problem_views.split_levels",
+            ),
+            (
+                r#"{"view_space":{"min":[0,0,0],"max":[1,1,1]},"problem_views":{"grid_origin":[0,2e9,0]}}"#,
+                "problem_views.grid_origin",
+            ),
+            (
+                r#"{"view_space":{"min":[0,0,0],"max":[1,1,1]},"problem_views":{"cell_size":1e-9}}"#,
+                "problem_views.cell_size",
             ),
             (r#"{"camera":{}}"#, "view_space"),
         ];

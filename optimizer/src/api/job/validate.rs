@@ -7,6 +7,15 @@ use crate::error::{Error, Result};
 /// Deepest refinement of a problem view below the minimum sizes.
 const MAX_REFINE_LEVELS: u8 = 4;
 
+/// Deepest halving of a problem cell (8³ parts of a cube at most).
+const MAX_SPLIT_LEVELS: u8 = 3;
+
+/// Largest coordinate magnitude a job may use, metres.
+const MAX_COORD: f64 = 1e9;
+
+/// Smallest cell side, metres (far above the rounding step of `MAX_COORD`).
+const MIN_CELL_SIZE: f64 = 1e-3;
+
 impl Job {
     /// Parses and validates a job; `source` names the file in errors.
     pub fn from_json(bytes: &[u8], source: &str) -> Result<Job> {
@@ -23,7 +32,7 @@ impl Job {
         let bad = |field: &str, msg: String| Error::bad(format!("{source}: {field}"), msg);
         let vs = &self.view_space;
         for (name, v) in [("view_space.min", vs.min), ("view_space.max", vs.max)] {
-            if v.iter().any(|c| !c.is_finite() || c.abs() > 1e9) {
+            if v.iter().any(|c| !c.is_finite() || c.abs() > MAX_COORD) {
                 return Err(bad(
                     name,
                     format!("{v:?} is not a finite coordinate (|c| ≤ 1e9)"),
@@ -105,14 +114,26 @@ impl Job {
             ));
         }
         let pv = &self.problem_views;
-        if !(pv.cell_size.is_finite() && pv.cell_size > 0.0) {
+        if !(pv.cell_size.is_finite() && pv.cell_size >= MIN_CELL_SIZE) {
             return Err(bad(
                 "problem_views.cell_size",
-                format!("{} must be positive", pv.cell_size),
+                format!("{} must be at least {MIN_CELL_SIZE} m", pv.cell_size),
             ));
         }
+        if !pv
+            .grid_origin
+            .iter()
+            .all(|v| v.is_finite() && v.abs() <= MAX_COORD)
+        {
+            return Err(bad(
+                "problem_views.grid_origin",
+                format!("{:?} must be finite coordinates", pv.grid_origin),
+            ));
+        }
+        // The anchored grid has at most one cell more per axis than the
+        // extent over the cell size.
         let cells: f64 = (0..3)
-            .map(|a| ((vs.max[a] - vs.min[a]) / pv.cell_size).ceil().max(1.0))
+            .map(|a| ((vs.max[a] - vs.min[a]) / pv.cell_size).ceil() + 1.0)
             .product();
         if cells > MAX_CELLS {
             return Err(bad(
@@ -133,6 +154,12 @@ impl Job {
             return Err(bad(
                 "problem_views.refine_levels",
                 format!("{} must be at most {MAX_REFINE_LEVELS}", pv.refine_levels),
+            ));
+        }
+        if pv.split_levels > MAX_SPLIT_LEVELS {
+            return Err(bad(
+                "problem_views.split_levels",
+                format!("{} must be at most {MAX_SPLIT_LEVELS}", pv.split_levels),
             ));
         }
         let cp = &self.candidates;
@@ -264,7 +291,7 @@ impl Job {
             if let Some(p) = w
                 .points
                 .iter()
-                .find(|p| p.iter().any(|c| !c.is_finite() || c.abs() > 1e9))
+                .find(|p| p.iter().any(|c| !c.is_finite() || c.abs() > MAX_COORD))
             {
                 return Err(bad(
                     "walkthrough.points",
