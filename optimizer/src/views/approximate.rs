@@ -147,14 +147,6 @@ fn halves(b: &Aabb) -> Vec<Aabb> {
     out
 }
 
-/// Adds to `acc` every part of `region`, halved `depth` times, from which
-/// some view in `vdi` may exceed the target (parts proven by
-/// [`proven_by_refinement`] left out), and sets `found` when there is one.
-/// A part already inside `acc` is looked at only while `found` is unset: it
-/// cannot grow `acc`, so once the VDI is known to keep a problem it is
-/// skipped, and `acc` and `found` end as if every part had been tested.
-/// The costs stay the cell's (closest distances, levels of detail and the
-/// visible set of the whole cell), which are conservative for its parts.
 /// The parts of `region` halved `depth` times (see [`halves`]), in order.
 fn leaves(region: &Aabb, depth: u8) -> Vec<Aabb> {
     let mut out = vec![*region];
@@ -164,14 +156,45 @@ fn leaves(region: &Aabb, depth: u8) -> Vec<Aabb> {
     out
 }
 
+/// The finest parts of `vdi` (refined `levels` times, parts outside the
+/// pitch range skipped) that refinement leaves unproven from `region`: those
+/// whose enclosing time, and each of whose coarser ancestors' below `vdi`,
+/// exceeds the target. Empty exactly when [`proven_by_refinement`] holds.
+fn unproven_directions(
+    ctx: &Context,
+    costs: &RegionCosts,
+    region: &Aabb,
+    vdi: &Vdi,
+    levels: u8,
+    cones: &mut u64,
+    out: &mut Vec<Vdi>,
+) {
+    for child in vdi.children() {
+        if !ctx.pitch_overlaps(&child) {
+            continue;
+        }
+        *cones += 1;
+        if !exceeds_target(ctx, costs, &enclosing_cone(region, &child, &ctx.lens)) {
+            continue;
+        }
+        if levels > 1 {
+            unproven_directions(ctx, costs, region, &child, levels - 1, cones, out);
+        } else {
+            out.push(child);
+        }
+    }
+}
+
 /// What the search for a cell's unproven parts keeps from one problem view
 /// to the next: the smallest box holding every unproven part so far and the
-/// last unproven part found (often unproven for the next VDI too), and, for
-/// the VDI at hand, the parts already proven.
+/// last unproven part found (often unproven for the next VDI too); and, for
+/// the VDI at hand, the finest directions refinement leaves unproven from
+/// the whole cell and the parts already proven.
 #[derive(Default)]
 struct Parts {
     union: Option<Aabb>,
     last: Option<Aabb>,
+    directions: Vec<Vdi>,
     proven: Vec<Aabb>,
 }
 
@@ -185,17 +208,34 @@ impl Parts {
         self.union = Some(self.union.map_or(part, |a| a.union(&part)));
     }
 
-    /// Adds every part of `region` (the cell), halved `levels.split` times, from
-    /// which some view in `vdi` may exceed the target (parts proven by
-    /// [`proven_by_refinement`] left out); true when there is one, false
-    /// when every part is proven and the VDI can be dropped.
+    /// True when no view from `part` along the VDI at hand exceeds the
+    /// target: every finest direction the whole cell leaves unproven has an
+    /// enclosing time within the target from the part (the others are
+    /// proven from the cell, which holds the part). Stops at the first that
+    /// exceeds it. (Testing the coarser directions above them first, as
+    /// refinement does, took more cones: from the cell they exceed.)
+    fn proven(&self, ctx: &Context, costs: &RegionCosts, part: &Aabb, cones: &mut u64) -> bool {
+        self.directions.iter().all(|d| {
+            *cones += 1;
+            !exceeds_target(ctx, costs, &enclosing_cone(part, d, &ctx.lens))
+        })
+    }
+
+    /// Adds every part of `region` (the cell), halved `levels.split` times,
+    /// from which some view in `vdi` may exceed the target (parts proven
+    /// with the VDI's finest directions left out); true when there is one,
+    /// false when every part is proven and the VDI can be dropped. The costs
+    /// stay the cell's (closest distances, levels of detail and the visible
+    /// set of the whole cell), which are conservative for its parts.
     ///
     /// Once the union of unproven parts is the whole cell, a VDI is kept
     /// untested (splitting could only drop it: conservative). Otherwise the
-    /// last unproven part and the cell's corner parts are tried first, so
-    /// that the union spans the cell after a few tests where the problem is
-    /// real; then a part inside the union is skipped once the VDI is known
-    /// to keep a problem (it cannot grow the union).
+    /// finest directions the cell leaves unproven are found once (a part
+    /// only has to prove those), then the last unproven part and the cell's
+    /// corner parts are tried first, so that the union spans the cell after
+    /// a few tests where the problem is real; then a part inside the union
+    /// is skipped once the VDI is known to keep a problem (it cannot grow
+    /// the union).
     fn add(
         &mut self,
         ctx: &Context,
@@ -205,10 +245,21 @@ impl Parts {
         levels: Levels,
         cones: &mut u64,
     ) -> bool {
-        let (refine, depth) = (levels.refine, levels.split);
+        let depth = levels.split;
         if self.covers(region) {
             return true;
         }
+        self.directions.clear();
+        unproven_directions(
+            ctx,
+            costs,
+            region,
+            vdi,
+            levels.refine,
+            cones,
+            &mut self.directions,
+        );
+
         self.proven.clear();
         let mut found = false;
         let corners = leaves(region, depth)
@@ -218,25 +269,22 @@ impl Parts {
             if (found && self.covers(&part)) || self.proven.contains(&part) {
                 continue;
             }
-            if proven_by_refinement(ctx, costs, &part, vdi, refine, cones) {
+            if self.proven(ctx, costs, &part, cones) {
                 self.proven.push(part);
             } else {
                 found = true;
                 self.record(part);
             }
         }
-        self.walk(ctx, costs, region, vdi, refine, depth, &mut found, cones);
+        self.walk(ctx, costs, region, depth, &mut found, cones);
         found
     }
 
-    #[allow(clippy::too_many_arguments)]
     fn walk(
         &mut self,
         ctx: &Context,
         costs: &RegionCosts,
         region: &Aabb,
-        vdi: &Vdi,
-        refine: u8,
         depth: u8,
         found: &mut bool,
         cones: &mut u64,
@@ -248,11 +296,11 @@ impl Parts {
             if depth == 1 && self.proven.contains(&part) {
                 continue;
             }
-            if proven_by_refinement(ctx, costs, &part, vdi, refine, cones) {
+            if self.proven(ctx, costs, &part, cones) {
                 continue;
             }
             if depth > 1 {
-                self.walk(ctx, costs, &part, vdi, refine, depth - 1, found, cones);
+                self.walk(ctx, costs, &part, depth - 1, found, cones);
             } else {
                 *found = true;
                 self.record(part);
