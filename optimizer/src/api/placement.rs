@@ -220,7 +220,11 @@ pub struct DirectionsJson {
 pub struct PlacedCpv {
     /// Index in `cpvs`.
     pub id: u32,
-    /// Its 3D region.
+    /// Its 3D region: its grid cell, or the box of the parts of that cell
+    /// where a view may exceed the target (`problem_views.split_levels`); a
+    /// view belongs to the CPV when its eye lies in the region and its
+    /// direction in `directions`. Views of the cell outside the region are
+    /// within the target without impostors.
     pub region: RegionJson,
     /// Its view directions.
     pub directions: DirectionsJson,
