@@ -94,10 +94,8 @@ impl RegionResult {
 /// split in four per level, parts outside the pitch range skipped) has an
 /// enclosing time within the target, so no view of (`region`, `vdi`)
 /// exceeds it. Stops at the first part that exceeds the target at the
-/// deepest level. Only the directions are refined: the region's costs
-/// (closest distances, levels of detail, visible set) are its cell's, and
-/// halving the region as well doubled the work for a small gain (most of
-/// the estimate's excess is the VDI's spread of directions).
+/// deepest level. The region's costs (closest distances, levels of detail,
+/// visible set) are its cell's.
 fn proven_by_refinement(
     ctx: &Context,
     costs: &RegionCosts,
@@ -106,21 +104,7 @@ fn proven_by_refinement(
     levels: u8,
     cones: &mut u64,
 ) -> bool {
-    if levels == 0 {
-        return false;
-    }
-    for child in vdi.children() {
-        if !ctx.pitch_overlaps(&child) {
-            continue;
-        }
-        *cones += 1;
-        if exceeds_target(ctx, costs, &enclosing_cone(region, &child, &ctx.lens))
-            && !proven_by_refinement(ctx, costs, region, &child, levels - 1, cones)
-        {
-            return false;
-        }
-    }
-    true
+    levels > 0 && !unproven_directions(ctx, costs, region, vdi, levels, cones, None)
 }
 
 /// The halves of `b` along each axis at least half as long as its longest
@@ -156,10 +140,11 @@ fn leaves(region: &Aabb, depth: u8) -> Vec<Aabb> {
     out
 }
 
-/// The finest parts of `vdi` (refined `levels` times, parts outside the
-/// pitch range skipped) that refinement leaves unproven from `region`: those
-/// whose enclosing time, and each of whose coarser ancestors' below `vdi`,
-/// exceeds the target. Empty exactly when [`proven_by_refinement`] holds.
+/// Whether refinement leaves some finest part of `vdi` (refined `levels`
+/// times, parts outside the pitch range skipped) unproven from `region`: a
+/// part whose enclosing time, and each of whose coarser ancestors' below
+/// `vdi`, exceeds the target. Without `out` it stops at the first; with it,
+/// it lists them all there.
 fn unproven_directions(
     ctx: &Context,
     costs: &RegionCosts,
@@ -167,8 +152,9 @@ fn unproven_directions(
     vdi: &Vdi,
     levels: u8,
     cones: &mut u64,
-    out: &mut Vec<Vdi>,
-) {
+    mut out: Option<&mut Vec<Vdi>>,
+) -> bool {
+    let mut any = false;
     for child in vdi.children() {
         if !ctx.pitch_overlaps(&child) {
             continue;
@@ -177,12 +163,28 @@ fn unproven_directions(
         if !exceeds_target(ctx, costs, &enclosing_cone(region, &child, &ctx.lens)) {
             continue;
         }
-        if levels > 1 {
-            unproven_directions(ctx, costs, region, &child, levels - 1, cones, out);
+        let found = if levels > 1 {
+            unproven_directions(
+                ctx,
+                costs,
+                region,
+                &child,
+                levels - 1,
+                cones,
+                out.as_deref_mut(),
+            )
         } else {
-            out.push(child);
+            if let Some(o) = out.as_deref_mut() {
+                o.push(child);
+            }
+            true
+        };
+        any |= found;
+        if any && out.is_none() {
+            return true;
         }
     }
+    any
 }
 
 /// What the search for a cell's unproven parts keeps from one problem view
@@ -257,9 +259,8 @@ impl Parts {
             vdi,
             levels.refine,
             cones,
-            &mut self.directions,
+            Some(&mut self.directions),
         );
-
         self.proven.clear();
         let mut found = false;
         let corners = leaves(region, depth)
