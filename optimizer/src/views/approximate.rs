@@ -191,16 +191,31 @@ fn unproven_directions(
 /// to the next: the smallest box holding every unproven part so far and the
 /// last unproven part found (often unproven for the next VDI too); and, for
 /// the VDI at hand, the finest directions refinement leaves unproven from
-/// the whole cell and the parts already proven.
-#[derive(Default)]
+/// the whole cell and the parts already proven. The cell's corner parts
+/// (those touching a corner of it) are found once.
 struct Parts {
     union: Option<Aabb>,
     last: Option<Aabb>,
+    corners: Vec<Aabb>,
     directions: Vec<Vdi>,
     proven: Vec<Aabb>,
 }
 
 impl Parts {
+    fn new(cell: &Aabb, depth: u8) -> Parts {
+        let corners = leaves(cell, depth)
+            .into_iter()
+            .filter(|p| (0..3).all(|a| p.min[a] == cell.min[a] || p.max[a] == cell.max[a]))
+            .collect();
+        Parts {
+            union: None,
+            last: None,
+            corners,
+            directions: Vec::new(),
+            proven: Vec::new(),
+        }
+    }
+
     fn covers(&self, b: &Aabb) -> bool {
         self.union.is_some_and(|a| a.contains_box(b))
     }
@@ -263,10 +278,8 @@ impl Parts {
         );
         self.proven.clear();
         let mut found = false;
-        let corners = leaves(region, depth)
-            .into_iter()
-            .filter(|p| (0..3).all(|a| p.min[a] == region.min[a] || p.max[a] == region.max[a]));
-        for part in self.last.into_iter().chain(corners) {
+        let first: Vec<Aabb> = self.last.iter().chain(&self.corners).copied().collect();
+        for part in first {
             if (found && self.covers(&part)) || self.proven.contains(&part) {
                 continue;
             }
@@ -362,14 +375,11 @@ fn process(
             problems.retain(|vdi| {
                 !proven_by_refinement(ctx, &costs, &region, vdi, levels.refine, &mut cones)
             });
-            // The cell's parts (halved twice) where each remaining problem
-            // view may still exceed the target: the CPVs of the cell share
-            // the smallest box holding them all, so where a problem ends
-            // inside a cell the grid's phase matters less.
             // The cell's parts where each remaining problem view may still
             // exceed the target; the CPVs of the cell share the smallest box
-            // holding them all as their region.
-            let mut parts = Parts::default();
+            // holding them all as their region, so where a problem ends
+            // inside a cell the grid's phase matters less.
+            let mut parts = Parts::new(&region, levels.split);
             if levels.refine > 0 && levels.split > 0 {
                 problems.retain(|vdi| parts.add(ctx, &costs, &region, vdi, levels, &mut cones));
             }
