@@ -47,7 +47,8 @@ pub struct EvaluateArgs {
     /// the view to be compared (--images).
     #[arg(long, default_value_t = 0.01)]
     min_coverage: f64,
-    /// Write the worst view's renders side by side as a PNG into this directory.
+    /// Write the worst view's renders and their difference side by side as a PNG
+    /// (worst_view.png) into this directory.
     #[arg(long)]
     dump: Option<PathBuf>,
     /// Visibility check: rays per view through the image (0: none).

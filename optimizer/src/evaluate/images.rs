@@ -77,6 +77,10 @@ pub struct ImagePair {
     pub geometry: Vec<u8>,
     /// Geometry with the impostors.
     pub impostors: Vec<u8>,
+    /// Per pixel: drawn by the impostors or by the geometry they replace.
+    pub footprint: Vec<bool>,
+    /// Per pixel: a footprint pixel with no colour match within one pixel.
+    pub mismatched: Vec<bool>,
 }
 
 /// Sky colour behind everything.
@@ -207,6 +211,26 @@ pub fn mismatch_fraction(
     tolerance: u8,
     mask: &[bool],
 ) -> f64 {
+    let bad = mismatch_map(a, b, width, height, tolerance, mask);
+    let counted = mask.iter().filter(|&&m| m).count();
+    if counted == 0 {
+        0.0
+    } else {
+        bad.iter().filter(|&&x| x).count() as f64 / counted as f64
+    }
+}
+
+/// Per pixel: true for the pixels of `mask` whose colour has no match
+/// (every channel within `tolerance`) within one pixel in the other image,
+/// in either direction.
+pub fn mismatch_map(
+    a: &[u8],
+    b: &[u8],
+    width: u32,
+    height: u32,
+    tolerance: u8,
+    mask: &[bool],
+) -> Vec<bool> {
     let (w, h) = (width as i64, height as i64);
     let px = |img: &[u8], x: i64, y: i64| -> [u8; 4] {
         let i = ((y * w + x) * 4) as usize;
@@ -225,23 +249,10 @@ pub fn mismatch_fraction(
         }
         false
     };
-    let (mut bad, mut counted) = (0u64, 0u64);
-    for y in 0..h {
-        for x in 0..w {
-            if !mask[(y * w + x) as usize] {
-                continue;
-            }
-            counted += 1;
-            if !matched(a, b, x, y) || !matched(b, a, x, y) {
-                bad += 1;
-            }
-        }
-    }
-    if counted == 0 {
-        0.0
-    } else {
-        bad as f64 / counted as f64
-    }
+    (0..h)
+        .flat_map(|y| (0..w).map(move |x| (x, y)))
+        .map(|(x, y)| mask[(y * w + x) as usize] && (!matched(a, b, x, y) || !matched(b, a, x, y)))
+        .collect()
 }
 
 /// The layers with every texel's colour magenta (coverage kept): the image
@@ -572,7 +583,9 @@ pub fn image_error(
             if coverage < opts.min_coverage || coverage == 0.0 {
                 return None;
             }
-            let mismatch = mismatch_fraction(&a, &b, w, h, opts.tolerance, &mask);
+            let mismatched = mismatch_map(&a, &b, w, h, opts.tolerance, &mask);
+            let counted = mask.iter().filter(|&&x| x).count() as f64;
+            let mismatch = mismatched.iter().filter(|&&x| x).count() as f64 / counted;
             let psnr = psnr_db(&a, &b, &mask);
             Some(Compared {
                 mismatch,
@@ -593,6 +606,8 @@ pub fn image_error(
                     height: h,
                     geometry: a,
                     impostors: b,
+                    footprint: mask,
+                    mismatched,
                 },
             })
         })
@@ -695,16 +710,41 @@ impl Prepared<'_> {
 }
 
 impl ImagePair {
-    /// The two renders side by side (geometry left, impostors right) with a
-    /// 4-pixel gap, as PNG.
+    /// The difference image: mismatching pixels red, the rest of the
+    /// impostors' footprint in the geometry's colours, everything else
+    /// faded to a light grey, so the footprint and its errors stand out.
+    pub fn difference(&self) -> Vec<u8> {
+        self.geometry
+            .chunks_exact(4)
+            .zip(self.footprint.iter().zip(&self.mismatched))
+            .flat_map(|(p, (&inside, &bad))| {
+                if bad {
+                    [255, 0, 0, 255]
+                } else if inside {
+                    [p[0], p[1], p[2], 255]
+                } else {
+                    let grey = (u32::from(p[0]) + u32::from(p[1]) + u32::from(p[2])) / 3;
+                    let g = (176 + grey / 4) as u8;
+                    [g, g, g, 255]
+                }
+            })
+            .collect()
+    }
+
+    /// The two renders and their difference side by side (geometry left,
+    /// impostors in the middle, [`ImagePair::difference`] right) with
+    /// 4-pixel gaps, as PNG.
     pub fn side_by_side_png(&self) -> Result<Vec<u8>> {
         let (w, h, gap) = (self.width as usize, self.height as usize, 4usize);
-        let out_w = 2 * w + gap;
+        let panels = [&self.geometry, &self.impostors, &self.difference()];
+        let out_w = panels.len() * w + (panels.len() - 1) * gap;
         let mut out = vec![255u8; out_w * h * 4];
         for y in 0..h {
             let row = &mut out[y * out_w * 4..(y + 1) * out_w * 4];
-            row[..w * 4].copy_from_slice(&self.geometry[y * w * 4..(y + 1) * w * 4]);
-            row[(w + gap) * 4..].copy_from_slice(&self.impostors[y * w * 4..(y + 1) * w * 4]);
+            for (k, img) in panels.iter().enumerate() {
+                let x0 = k * (w + gap) * 4;
+                row[x0..x0 + w * 4].copy_from_slice(&img[y * w * 4..(y + 1) * w * 4]);
+            }
         }
         crate::bake::encode_png(&out, out_w as u32, h as u32)
     }
@@ -798,6 +838,52 @@ mod tests {
         let mut noisy = a.clone();
         noisy[0] = 190;
         assert_eq!(mismatch_fraction(&a, &noisy, w, h, 16, &all), 0.0);
+    }
+
+    /// The difference panel marks exactly the mismatching footprint pixels
+    /// red, keeps the rest of the footprint in the geometry's colours and
+    /// fades the others; the dump is the three panels side by side.
+    #[test]
+    fn difference_marks_the_mismatching_footprint_pixels() {
+        let (w, h) = (8u32, 8u32);
+        let img = |f: &dyn Fn(u32, u32) -> bool| -> Vec<u8> {
+            (0..h)
+                .flat_map(|y| (0..w).map(move |x| (x, y)))
+                .flat_map(|(x, y)| if f(x, y) { [20, 90, 40, 255] } else { SKY })
+                .collect()
+        };
+        let a = img(&|x, _| x < 4);
+        let b = img(&|x, _| x < 6);
+        let footprint: Vec<bool> = (0..64).map(|i| (2..7).contains(&(i % 8))).collect();
+        let mismatched = mismatch_map(&a, &b, w, h, 8, &footprint);
+        // Columns 4 and 5 (see the one-pixel test above), inside the footprint.
+        let expected: Vec<bool> = (0..64).map(|i| (4..6).contains(&(i % 8))).collect();
+        assert_eq!(mismatched, expected);
+        let pair = ImagePair {
+            width: w,
+            height: h,
+            geometry: a.clone(),
+            impostors: b,
+            footprint: footprint.clone(),
+            mismatched,
+        };
+        let d = pair.difference();
+        for i in 0..64 {
+            let p = &d[4 * i..4 * i + 4];
+            if expected[i] {
+                assert_eq!(p, [255, 0, 0, 255]);
+            } else if footprint[i] {
+                assert_eq!(p, &a[4 * i..4 * i + 4]);
+            } else {
+                assert!(p[0] == p[1] && p[1] == p[2] && p[0] >= 176, "{p:?}");
+            }
+        }
+        let png = pair.side_by_side_png().unwrap();
+        let (width, height) = (
+            u32::from_be_bytes(png[16..20].try_into().unwrap()),
+            u32::from_be_bytes(png[20..24].try_into().unwrap()),
+        );
+        assert_eq!((width, height), (3 * w + 8, h));
     }
 
     #[test]
