@@ -171,8 +171,15 @@ pub(crate) fn surface<'a>(geom: &'a SceneGeometry, material: u32) -> Surface<'a>
         },
         double_sided: m.double_sided,
         lit: true,
+        alpha_to_coverage: false,
     }
 }
+
+/// Samples per side of a texel: a layer is drawn at this many times its
+/// resolution and box-filtered, so a texel's alpha is the share of it the
+/// slab's geometry covers and its colour their mean (thin features keep
+/// their share instead of being kept or lost whole by one sample).
+const TEXEL_SAMPLES: u32 = 4;
 
 /// Renders the layers of one impostor.
 fn render_impostor(
@@ -183,7 +190,7 @@ fn render_impostor(
     let c = DVec3::from_array(imp.sphere.center);
     let (eye, slabs) = slabs(imp);
     let res = imp.resolution;
-    let view = View::enclosing_sphere(eye, c, imp.sphere.radius, res);
+    let view = View::enclosing_sphere(eye, c, imp.sphere.radius, res * TEXEL_SAMPLES);
     let tris = cluster_triangles(geom, by_object, &imp.objects);
     // Depth range of every triangle, to draw each only into its slabs.
     let ranges: Vec<(f64, f64)> = tris
@@ -197,7 +204,7 @@ fn render_impostor(
         .iter()
         .map(|t| (t.material, surface(geom, t.material)))
         .collect();
-    let mut raster = Raster::new(res, res);
+    let mut raster = Raster::supersampled(res, res, TEXEL_SAMPLES);
     let last = slabs.len() - 1;
     let mut layers = Vec::with_capacity(slabs.len());
     for (k, &(z0, z1, mid)) in slabs.iter().enumerate() {
@@ -205,7 +212,7 @@ fn render_impostor(
         // cluster is lost to rounding.
         let lo = if k == 0 { 0.0 } else { z0 };
         let hi = if k == last { f64::INFINITY } else { z1 };
-        raster.reset(res, res);
+        raster.reset(view.width, view.height);
         for (t, &(zmin, zmax)) in tris.iter().zip(&ranges) {
             if zmax < lo || zmin >= hi {
                 continue;
@@ -215,12 +222,12 @@ fn render_impostor(
         if raster.color.iter().all(|p| p[3] == 0) {
             continue;
         }
-        let r = f64::from(res);
+        let r = f64::from(view.width);
         layers.push(Layer {
             impostor: imp.id,
             index: k as u32,
             res,
-            rgba: dilate(&raster.rgba_bytes(), res),
+            rgba: dilate(&raster.resolve().concat(), res),
             corners: [
                 view.unproject(0.0, 0.0, mid),
                 view.unproject(0.0, r, mid),

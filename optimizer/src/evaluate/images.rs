@@ -83,6 +83,12 @@ pub struct ImagePair {
     pub mismatched: Vec<bool>,
 }
 
+/// Samples per side of a pixel: both images are drawn at this many times
+/// their resolution and box-filtered, so a feature thinner than a pixel
+/// shows as the share of the pixel it covers in both (point samples of the
+/// geometry and of the layers' texels would each keep or lose it by chance).
+const SAMPLES: u32 = 3;
+
 /// Sky colour behind everything.
 const SKY: [u8; 4] = [168, 196, 224, 255];
 
@@ -160,6 +166,7 @@ impl<'a> Renderer<'a> {
                 alpha_cutoff: Some(0.5),
                 double_sided: true,
                 lit: false,
+                alpha_to_coverage: true,
             };
             let uv = [(0.0, 0.0), (0.0, 1.0), (1.0, 1.0), (1.0, 0.0)];
             let v = |k: usize| Vertex {
@@ -222,7 +229,11 @@ pub fn mismatch_fraction(
 
 /// Per pixel: true for the pixels of `mask` whose colour has no match
 /// (every channel within `tolerance`) within one pixel in the other image,
-/// in either direction.
+/// in either direction. Offsets run in half-pixel steps, the other image
+/// read between pixels as the mean of those around the point: in
+/// antialiased images an edge moved by part of a pixel (which the
+/// one-pixel parallax budget allows) shows blends no whole-pixel neighbour
+/// has.
 pub fn mismatch_map(
     a: &[u8],
     b: &[u8],
@@ -236,13 +247,33 @@ pub fn mismatch_map(
         let i = ((y * w + x) * 4) as usize;
         [img[i], img[i + 1], img[i + 2], img[i + 3]]
     };
-    let close = |p: [u8; 4], q: [u8; 4]| (0..3).all(|k| p[k].abs_diff(q[k]) <= tolerance);
+    let tol = f32::from(tolerance);
+    // The other image at `(x, y) + (hx, hy) / 2`: a pixel, or the mean of
+    // the two or four pixels around a point between them (`None` outside).
+    let at = |img: &[u8], x: i64, y: i64, hx: i64, hy: i64| -> Option<[f32; 3]> {
+        let xs = [x + hx.div_euclid(2), x + (hx + 1).div_euclid(2)];
+        let ys = [y + hy.div_euclid(2), y + (hy + 1).div_euclid(2)];
+        if xs[0] < 0 || ys[0] < 0 || xs[1] >= w || ys[1] >= h {
+            return None;
+        }
+        let mut sum = [0.0f32; 3];
+        for &yy in &ys {
+            for &xx in &xs {
+                let q = px(img, xx, yy);
+                for k in 0..3 {
+                    sum[k] += f32::from(q[k]);
+                }
+            }
+        }
+        Some(sum.map(|v| v / 4.0))
+    };
     let matched = |src: &[u8], other: &[u8], x: i64, y: i64| {
         let p = px(src, x, y);
-        for dy in -1..=1 {
-            for dx in -1..=1 {
-                let (nx, ny) = (x + dx, y + dy);
-                if nx >= 0 && ny >= 0 && nx < w && ny < h && close(p, px(other, nx, ny)) {
+        for hy in -2..=2 {
+            for hx in -2..=2 {
+                if let Some(q) = at(other, x, y, hx, hy)
+                    && (0..3).all(|k| (f32::from(p[k]) - q[k]).abs() <= tol)
+                {
                     return true;
                 }
             }
@@ -555,7 +586,8 @@ pub fn image_error(
         .par_iter()
         .map(|c| {
             let cpv = &placement.cpvs[c.cpv as usize];
-            let view = View::perspective(c.eye, c.dir, job.camera.fov_deg, w, h);
+            let view =
+                View::perspective(c.eye, c.dir, job.camera.fov_deg, w * SAMPLES, h * SAMPLES);
             let frustum = ViewFrustum::new(c.eye, c.dir, job.camera.fov_deg, aspect);
             let mut skip: Vec<u32> = cpv
                 .impostors
@@ -563,10 +595,10 @@ pub fn image_error(
                 .flat_map(|&k| placement.impostors[k as usize].objects.iter().copied())
                 .collect();
             skip.sort_unstable();
-            let mut raster = Raster::new(w, h);
+            let mut raster = Raster::supersampled(w, h, SAMPLES);
             let mut draw = |skip: &[u32], layers: &[&Layer]| {
                 renderer.render(&mut raster, &view, &frustum, skip, layers);
-                raster.rgba_bytes()
+                raster.resolve().concat()
             };
             let a = draw(&[], &[]);
             let holes = draw(&skip, &[]);
@@ -810,6 +842,25 @@ mod tests {
         let first = 10.0 * (255.0f64 * 255.0 / (100.0 / 3.0)).log10();
         assert!((psnr_db(&a, &b, &[true, false]) - first).abs() < 1e-9);
         assert_eq!(psnr_db(&a, &b, &[false, true]), 100.0);
+    }
+
+    /// An antialiased edge moved by half a pixel blends its pixel half-way
+    /// between the two sides, a colour no whole pixel of the other image
+    /// has: it matches between two pixels. A whole-pixel blend two pixels
+    /// away still does not.
+    #[test]
+    fn antialiased_edge_moved_by_part_of_a_pixel_matches() {
+        let (w, h) = (8u32, 8u32);
+        let row = |cols: [[u8; 4]; 8]| -> Vec<u8> { (0..h).flat_map(|_| cols.concat()).collect() };
+        let (d, l) = ([40, 40, 40, 255], [220, 220, 220, 255]);
+        let mid = [130, 130, 130, 255];
+        let a = row([d, d, d, d, l, l, l, l]);
+        let half = row([d, d, d, d, mid, l, l, l]);
+        let all = vec![true; 64];
+        assert_eq!(mismatch_fraction(&a, &half, w, h, 24, &all), 0.0);
+        // The blend three pixels over: nothing within one pixel is half-way.
+        let far = row([d, d, d, d, l, l, l, mid]);
+        assert_eq!(mismatch_fraction(&a, &far, w, h, 24, &all), 8.0 / 64.0);
     }
 
     #[test]

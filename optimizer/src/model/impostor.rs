@@ -8,7 +8,8 @@
 //! ([`ImpostorModel::shaft`], [`ImpostorModel::boxed`]); far from the
 //! cluster it is the design's small-angle formula (shaft `R·sin α / (ε·θ·
 //! d_min)`, box `r·(1/z_n − 1/z_f) / (2·ε·θ)`), close in it is more;
-//! - resolution `ceil(2R / (θ·(d_min − R)))` texels per side per layer, with
+//! - resolution `ceil(k·2R / (θ·(d_min − R)))` texels per side per layer
+//!   (`k` = `memory.texels_per_pixel`, default 1), with
 //!   `d_min` the closest distance from the view cell to `c`, clamped to
 //!   `[4, max_res]`; a cell that needs more than `max_res` is invalid;
 //! - memory `n · res² · bytes_per_texel · (4/3 with mipmaps)`.
@@ -166,6 +167,8 @@ pub struct ImpostorModel {
     pub bytes_per_texel: f64,
     /// Largest texture side.
     pub max_res: u32,
+    /// Texels per pixel at the closest viewpoint, per side.
+    pub texels_per_pixel: f64,
 }
 
 /// Distances from a shaft's apex, as multiples of its minimum distance, at
@@ -219,6 +222,7 @@ impl ImpostorModel {
             eps: job.max_error_px,
             bytes_per_texel: m.bytes_per_texel * if m.mipmaps { 4.0 / 3.0 } else { 1.0 },
             max_res: m.max_texture_size,
+            texels_per_pixel: m.texels_per_pixel,
         }
     }
 
@@ -228,7 +232,7 @@ impl ImpostorModel {
         if d_min <= r {
             return None;
         }
-        let res = (2.0 * r / (self.theta * (d_min - r))).ceil();
+        let res = (self.texels_per_pixel * 2.0 * r / (self.theta * (d_min - r))).ceil();
         if !res.is_finite() || res > f64::from(self.max_res) {
             return None;
         }
@@ -373,6 +377,23 @@ mod tests {
 
     fn model() -> ImpostorModel {
         ImpostorModel::new(&Job::with_view_space([0.0; 3], [1.0; 3]))
+    }
+
+    /// `memory.texels_per_pixel` scales the resolution's formula by itself:
+    /// R = 10 at d_min = 110 is 2·10 / (θ·100) = 123.6 → 124 texels, and
+    /// twice that before rounding up at k = 2 (247.2 → 248); the cap holds
+    /// on the scaled count.
+    #[test]
+    fn texels_per_pixel_scales_the_resolution() {
+        let mut job = Job::with_view_space([0.0; 3], [1.0; 3]);
+        assert_eq!(ImpostorModel::new(&job).resolution(10.0, 110.0), Some(124));
+        job.memory.texels_per_pixel = 2.0;
+        assert_eq!(ImpostorModel::new(&job).resolution(10.0, 110.0), Some(248));
+        job.memory.max_texture_size = 200;
+        assert_eq!(ImpostorModel::new(&job).resolution(10.0, 110.0), None);
+        job.memory.texels_per_pixel = 0.0;
+        let e = job.validate("job.json").unwrap_err().to_string();
+        assert!(e.contains("memory.texels_per_pixel"), "{e}");
     }
 
     #[test]

@@ -47,6 +47,12 @@ pub struct Surface<'a> {
     /// Apply the fixed light; false draws the colour unlit (impostor quads
     /// are drawn unlit: their texels already carry the lighting).
     pub lit: bool,
+    /// With an alpha cutoff, on a raster of [`Raster::samples`]² samples
+    /// per pixel: each sample of a pixel compares alpha with its own
+    /// threshold, evenly spread over `(0, 1)`, so a fragment covers a share
+    /// of the pixel equal to its alpha (what a GPU's alpha to coverage does
+    /// under multisampling) instead of all or nothing at the cutoff.
+    pub alpha_to_coverage: bool,
 }
 
 impl Default for Surface<'_> {
@@ -57,6 +63,7 @@ impl Default for Surface<'_> {
             alpha_cutoff: None,
             double_sided: false,
             lit: true,
+            alpha_to_coverage: false,
         }
     }
 }
@@ -176,6 +183,11 @@ pub struct Raster {
     pub color: Vec<[u8; 4]>,
     /// View depth per pixel; `f32::INFINITY` where nothing was drawn.
     pub depth: Vec<f32>,
+    /// Samples per side of an output pixel (1: every raster pixel is one):
+    /// the raster is drawn at that many times the output resolution and
+    /// [`Raster::resolve`]d to it, and alpha to coverage spreads its
+    /// thresholds over each block of samples.
+    pub samples: u32,
 }
 
 impl Raster {
@@ -187,7 +199,56 @@ impl Raster {
             height,
             color: vec![[0; 4]; n],
             depth: vec![f32::INFINITY; n],
+            samples: 1,
         }
+    }
+
+    /// Buffers for an output of `width × height` pixels with `samples`²
+    /// samples per pixel (the raster is `samples` times larger per side).
+    pub fn supersampled(width: u32, height: u32, samples: u32) -> Raster {
+        let s = samples.max(1);
+        let mut r = Raster::new(width * s, height * s);
+        r.samples = s;
+        r
+    }
+
+    /// The output pixels, each the box-filtered average of its samples: the
+    /// colour is the mean of its covered samples (alpha above 0) in linear
+    /// light, and alpha the share of them covered. Rows from the top.
+    pub fn resolve(&self) -> Vec<[u8; 4]> {
+        let s = self.samples.max(1) as usize;
+        if s == 1 {
+            return self.color.clone();
+        }
+        let (w, h) = (self.width as usize / s, self.height as usize / s);
+        static LUT: std::sync::OnceLock<[f32; 256]> = std::sync::OnceLock::new();
+        let lut = LUT.get_or_init(|| std::array::from_fn(|i| srgb8_to_linear(i as u8)));
+        let mut out = Vec::with_capacity(w * h);
+        for y in 0..h {
+            for x in 0..w {
+                let (mut sum, mut covered) = ([0.0f32; 3], 0u32);
+                for sy in 0..s {
+                    let row = (y * s + sy) * self.width as usize;
+                    for sx in 0..s {
+                        let p = self.color[row + x * s + sx];
+                        if p[3] > 0 {
+                            covered += 1;
+                            for k in 0..3 {
+                                sum[k] += lut[p[k] as usize];
+                            }
+                        }
+                    }
+                }
+                out.push(if covered == 0 {
+                    [0; 4]
+                } else {
+                    let c = sum.map(|v| linear_to_srgb8(v / covered as f32));
+                    let a = (255 * covered as usize + s * s / 2) / (s * s);
+                    [c[0], c[1], c[2], a as u8]
+                });
+            }
+        }
+        out
     }
 
     /// Resizes (reusing the allocation) and clears to transparent black.
@@ -362,10 +423,17 @@ impl Raster {
                         rgba[k] *= s[k];
                     }
                 }
-                if let Some(cut) = surface.alpha_cutoff
-                    && rgba[3] < cut
-                {
-                    continue;
+                if let Some(cut) = surface.alpha_cutoff {
+                    let s = self.samples;
+                    let cut = if surface.alpha_to_coverage && s > 1 {
+                        let rank = (y % s) * s + x % s;
+                        (rank as f32 + 0.5) / (s * s) as f32
+                    } else {
+                        cut
+                    };
+                    if rgba[3] < cut {
+                        continue;
+                    }
                 }
                 if surface.lit {
                     let n = (normals[0] * wq[0] + normals[1] * wq[1] + normals[2] * wq[2])

@@ -215,6 +215,12 @@ impl Job {
                 format!("{} must be in (0, 64]", m.bytes_per_texel),
             ));
         }
+        if !(m.texels_per_pixel.is_finite() && (0.25..=8.0).contains(&m.texels_per_pixel)) {
+            return Err(bad(
+                "memory.texels_per_pixel",
+                format!("{} must be in [0.25, 8]", m.texels_per_pixel),
+            ));
+        }
         if !(4..=16384).contains(&m.max_texture_size) {
             return Err(bad(
                 "memory.max_texture_size",
