@@ -99,12 +99,15 @@ fn bake_validates_and_looks_like_the_geometry() {
         .as_f64()
         .unwrap();
     assert!(mean <= p95 && p95 <= max, "{image}");
+    // Antialiased on both sides (0.029 / 0.047 measured; point-sampled
+    // images, which keep or lose sub-pixel features by chance, gave
+    // 0.074 / 0.130).
     assert!(
-        mean <= 0.1,
+        mean <= 0.05,
         "mean mismatch {mean} over impostor pixels: {image}"
     );
     assert!(
-        max <= 0.25,
+        max <= 0.1,
         "worst mismatch {max} over impostor pixels: {image}"
     );
     // The control (the same views, every layer texel magenta) must fail
