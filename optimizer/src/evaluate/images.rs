@@ -141,11 +141,21 @@ impl<'a> Renderer<'a> {
         raster.reset(view.width, view.height);
         let all = (0.0, f64::INFINITY);
         let mut surfaces: HashMap<u32, Surface> = HashMap::new();
-        for (o, &(c, r)) in self.spheres.iter().enumerate() {
-            let o = o as u32;
-            if r < 0.0 || skip.binary_search(&o).is_ok() || !frustum.intersects_sphere(c, r) {
-                continue;
-            }
+        // Nearest first, so that hidden fragments fail the depth test before
+        // they are shaded.
+        let mut order: Vec<(f64, u32)> = self
+            .spheres
+            .iter()
+            .enumerate()
+            .filter(|&(o, &(c, r))| {
+                r >= 0.0
+                    && skip.binary_search(&(o as u32)).is_err()
+                    && frustum.intersects_sphere(c, r)
+            })
+            .map(|(o, &(c, r))| ((c - view.eye).length() - r, o as u32))
+            .collect();
+        order.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+        for (_, o) in order {
             for t in cluster_triangles(self.geom, &self.by_object, &[o]) {
                 let s = *surfaces
                     .entry(t.material)
