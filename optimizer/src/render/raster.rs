@@ -221,8 +221,6 @@ impl Raster {
             return self.color.clone();
         }
         let (w, h) = (self.width as usize / s, self.height as usize / s);
-        static LUT: std::sync::OnceLock<[f32; 256]> = std::sync::OnceLock::new();
-        let lut = LUT.get_or_init(|| std::array::from_fn(|i| srgb8_to_linear(i as u8)));
         let mut out = Vec::with_capacity(w * h);
         for y in 0..h {
             for x in 0..w {
@@ -234,7 +232,7 @@ impl Raster {
                         if p[3] > 0 {
                             covered += 1;
                             for k in 0..3 {
-                                sum[k] += lut[p[k] as usize];
+                                sum[k] += srgb8_to_linear(p[k]);
                             }
                         }
                     }
@@ -513,8 +511,14 @@ pub fn sample_bilinear(t: &TextureRef, uv: Vec2) -> [f32; 4] {
     out
 }
 
-/// sRGB-encoded byte to linear.
+/// sRGB-encoded byte to linear (a table of [`srgb8_to_linear_exact`]).
 pub fn srgb8_to_linear(v: u8) -> f32 {
+    static TABLE: std::sync::OnceLock<[f32; 256]> = std::sync::OnceLock::new();
+    TABLE.get_or_init(|| std::array::from_fn(|i| srgb8_to_linear_exact(i as u8)))[v as usize]
+}
+
+/// sRGB-encoded byte to linear, by the formula.
+fn srgb8_to_linear_exact(v: u8) -> f32 {
     let c = f32::from(v) / 255.0;
     if c <= 0.04045 {
         c / 12.92
@@ -523,8 +527,35 @@ pub fn srgb8_to_linear(v: u8) -> f32 {
     }
 }
 
-/// Linear value to an sRGB-encoded byte (clamped).
+/// Linear value to an sRGB-encoded byte (clamped): how many of the 255
+/// thresholds of [`linear_to_srgb8_exact`] (the least value giving each
+/// byte from 1 up, found once by bisection) lie at or below it. The
+/// formula rises with its argument, so this is its value without a
+/// `powf` per call.
 pub fn linear_to_srgb8(v: f32) -> u8 {
+    static THRESHOLDS: std::sync::OnceLock<[f32; 255]> = std::sync::OnceLock::new();
+    let t = THRESHOLDS.get_or_init(|| {
+        std::array::from_fn(|k| {
+            let byte = k as u8 + 1;
+            // The least non-negative f32 (by bit pattern, which orders
+            // them) at which the formula reaches `byte`.
+            let (mut lo, mut hi) = (0u32, 1.0f32.to_bits());
+            while lo < hi {
+                let mid = lo + (hi - lo) / 2;
+                if linear_to_srgb8_exact(f32::from_bits(mid)) >= byte {
+                    hi = mid;
+                } else {
+                    lo = mid + 1;
+                }
+            }
+            f32::from_bits(lo)
+        })
+    });
+    t.partition_point(|&x| x <= v) as u8
+}
+
+/// Linear value to an sRGB-encoded byte (clamped), by the formula.
+fn linear_to_srgb8_exact(v: f32) -> u8 {
     let c = v.clamp(0.0, 1.0);
     let s = if c <= 0.003_130_8 {
         c * 12.92
@@ -738,6 +769,35 @@ mod tests {
     fn srgb_round_trip() {
         for b in 0..=255u8 {
             assert_eq!(linear_to_srgb8(srgb8_to_linear(b)), b);
+            assert_eq!(srgb8_to_linear(b), srgb8_to_linear_exact(b));
+        }
+    }
+
+    /// The thresholds give the formula's byte: at every 97th f32 of
+    /// [0, 1], one ulp either side of each threshold, and outside [0, 1].
+    #[test]
+    fn srgb_encoding_by_thresholds_is_the_formula() {
+        let one = 1.0f32.to_bits();
+        let check = |v: f32| assert_eq!(linear_to_srgb8(v), linear_to_srgb8_exact(v), "{v:e}");
+        for bits in (0..=one).step_by(97) {
+            check(f32::from_bits(bits));
+        }
+        for b in 0..=255u8 {
+            let v = srgb8_to_linear(b);
+            for d in [-2i64, -1, 0, 1, 2] {
+                check(f32::from_bits((i64::from(v.to_bits()) + d).max(0) as u32));
+            }
+        }
+        for v in [
+            -1.0,
+            -0.0,
+            1.0,
+            1.5,
+            f32::INFINITY,
+            f32::NEG_INFINITY,
+            f32::NAN,
+        ] {
+            check(v);
         }
     }
 
