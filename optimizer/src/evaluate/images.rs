@@ -228,7 +228,11 @@ pub fn mismatch_fraction(
     tolerance: u8,
     mask: &[bool],
 ) -> f64 {
-    let bad = mismatch_map(a, b, width, height, tolerance, mask);
+    share_of(&mismatch_map(a, b, width, height, tolerance, mask), mask)
+}
+
+/// The share of the pixels of `mask` that `bad` marks; 0 for an empty mask.
+fn share_of(bad: &[bool], mask: &[bool]) -> f64 {
     let counted = mask.iter().filter(|&&m| m).count();
     if counted == 0 {
         0.0
@@ -626,8 +630,7 @@ pub fn image_error(
                 return None;
             }
             let mismatched = mismatch_map(&a, &b, w, h, opts.tolerance, &mask);
-            let counted = mask.iter().filter(|&&x| x).count() as f64;
-            let mismatch = mismatched.iter().filter(|&&x| x).count() as f64 / counted;
+            let mismatch = share_of(&mismatched, &mask);
             let psnr = psnr_db(&a, &b, &mask);
             Some(Compared {
                 mismatch,
@@ -873,15 +876,18 @@ mod tests {
         assert_eq!(mismatch_fraction(&a, &far, w, h, 24, &all), 8.0 / 64.0);
     }
 
+    /// A `w × h` RGBA8 image: `colour` where `f` holds, sky elsewhere.
+    fn painted(w: u32, h: u32, colour: [u8; 4], f: &dyn Fn(u32, u32) -> bool) -> Vec<u8> {
+        (0..h)
+            .flat_map(|y| (0..w).map(move |x| (x, y)))
+            .flat_map(|(x, y)| if f(x, y) { colour } else { SKY })
+            .collect()
+    }
+
     #[test]
     fn one_pixel_shift_is_not_a_mismatch_but_a_hole_is() {
         let (w, h) = (8u32, 8u32);
-        let img = |f: &dyn Fn(u32, u32) -> bool| -> Vec<u8> {
-            (0..h)
-                .flat_map(|y| (0..w).map(move |x| (x, y)))
-                .flat_map(|(x, y)| if f(x, y) { [200, 0, 0, 255] } else { SKY })
-                .collect()
-        };
+        let img = |f: &dyn Fn(u32, u32) -> bool| painted(w, h, [200, 0, 0, 255], f);
         let all = vec![true; 64];
         let a = img(&|x, _| x < 4);
         let shifted = img(&|x, _| x < 5);
@@ -907,12 +913,7 @@ mod tests {
     #[test]
     fn difference_marks_the_mismatching_footprint_pixels() {
         let (w, h) = (8u32, 8u32);
-        let img = |f: &dyn Fn(u32, u32) -> bool| -> Vec<u8> {
-            (0..h)
-                .flat_map(|y| (0..w).map(move |x| (x, y)))
-                .flat_map(|(x, y)| if f(x, y) { [20, 90, 40, 255] } else { SKY })
-                .collect()
-        };
+        let img = |f: &dyn Fn(u32, u32) -> bool| painted(w, h, [20, 90, 40, 255], f);
         let a = img(&|x, _| x < 4);
         let b = img(&|x, _| x < 6);
         let footprint: Vec<bool> = (0..64).map(|i| (2..7).contains(&(i % 8))).collect();

@@ -126,12 +126,8 @@ fn cell_maps(ctx: &Context, job: &Job, aabb: Aabb, visible: Option<&ObjectSet>) 
                 let s = spheres[o as usize];
                 sphere = Some(sphere.map_or(s, |acc| acc.merge(&s)));
             }
-            let res_u = ((u1 - u0) * imodel.texels_per_pixel / imodel.theta)
-                .ceil()
-                .max(4.0);
-            let res_v = ((v1 - v0) * imodel.texels_per_pixel / imodel.theta)
-                .ceil()
-                .max(4.0);
+            let res_u = ((u1 - u0) / imodel.texel_angle()).ceil().max(4.0);
+            let res_v = ((v1 - v0) / imodel.texel_angle()).ceil().max(4.0);
             let memory = (res_u * res_v * imodel.bytes_per_texel).ceil() as u64;
             impostors.push((
                 objects,

@@ -226,13 +226,19 @@ impl ImpostorModel {
         }
     }
 
+    /// The angle a texel spans seen from an impostor's closest viewpoint:
+    /// the pixel angle over `memory.texels_per_pixel`.
+    pub fn texel_angle(&self) -> f64 {
+        self.theta / self.texels_per_pixel
+    }
+
     /// Texture resolution for a cluster of radius `r` seen no closer than
     /// `d_min`, or `None` when it exceeds the maximum texture size.
     pub fn resolution(&self, r: f64, d_min: f64) -> Option<u32> {
         if d_min <= r {
             return None;
         }
-        let res = (self.texels_per_pixel * 2.0 * r / (self.theta * (d_min - r))).ceil();
+        let res = (2.0 * r / (self.texel_angle() * (d_min - r))).ceil();
         if !res.is_finite() || res > f64::from(self.max_res) {
             return None;
         }
