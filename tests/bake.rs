@@ -100,14 +100,15 @@ fn bake_validates_and_looks_like_the_geometry() {
         .unwrap();
     assert!(mean <= p95 && p95 <= max, "{image}");
     // Antialiased on both sides (0.029 / 0.047 measured; point-sampled
-    // images, which keep or lose sub-pixel features by chance, gave
-    // 0.074 / 0.130).
+    // images and layers, which keep or lose sub-pixel features by chance,
+    // give 0.049 / 0.081 with the same half-pixel matching, 0.074 / 0.130
+    // without it).
     assert!(
-        mean <= 0.05,
+        mean <= 0.04,
         "mean mismatch {mean} over impostor pixels: {image}"
     );
     assert!(
-        max <= 0.1,
+        max <= 0.07,
         "worst mismatch {max} over impostor pixels: {image}"
     );
     // The control (the same views, every layer texel magenta) must fail

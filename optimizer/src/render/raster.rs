@@ -692,6 +692,65 @@ mod tests {
         assert!(r.color.iter().any(|c| c[3] == 255));
     }
 
+    /// On a raster of 3×3 samples per pixel a texture of alpha 0.3 under
+    /// alpha to coverage covers 3 of the 9 samples of each pixel (thresholds
+    /// 0.06, 0.17, 0.28, 0.39, …), resolved to alpha 1/3; tested at the
+    /// cutoff 0.5 instead, it covers nothing. A whole pixel covered is
+    /// resolved to alpha 1.
+    #[test]
+    fn alpha_to_coverage_covers_the_share_of_a_pixel_its_alpha_says() {
+        let texels = [200u8, 40, 40, 77];
+        let tex = TextureRef {
+            width: 1,
+            height: 1,
+            rgba: &texels,
+            wrap_s: Wrap::ClampToEdge,
+            wrap_t: Wrap::ClampToEdge,
+        };
+        let draw = |a2c: bool| {
+            let s = Surface {
+                texture: Some(tex),
+                alpha_cutoff: Some(0.5),
+                alpha_to_coverage: a2c,
+                ..unlit([1.0; 4])
+            };
+            let view = View::perspective(DVec3::ZERO, -DVec3::Z, 90.0, 12, 12);
+            let v = |x: f64, y: f64| Vertex {
+                pos: DVec3::new(x, y, -1.0),
+                normal: Vec3::Z,
+                uv: Vec2::new(0.5, 0.5),
+            };
+            // One triangle over the whole window.
+            let mut r = Raster::supersampled(4, 4, 3);
+            r.draw(&view, &[v(-4.0, -4.0), v(8.0, -4.0), v(-4.0, 8.0)], &s, ALL);
+            r.resolve()
+        };
+        for p in draw(true) {
+            assert_eq!(p[3], 85, "{p:?}"); // 3 of 9 samples: alpha 0.3 → 1/3
+            assert!(p[0] > p[1], "{p:?}");
+        }
+        assert!(draw(false).iter().all(|p| p[3] == 0));
+        let opaque = Surface {
+            alpha_cutoff: Some(0.5),
+            alpha_to_coverage: true,
+            ..unlit([0.5, 0.5, 0.5, 1.0])
+        };
+        let view = View::perspective(DVec3::ZERO, -DVec3::Z, 90.0, 12, 12);
+        let v = |x: f64, y: f64| Vertex {
+            pos: DVec3::new(x, y, -1.0),
+            normal: Vec3::Z,
+            uv: Vec2::ZERO,
+        };
+        let mut r = Raster::supersampled(4, 4, 3);
+        r.draw(
+            &view,
+            &[v(-4.0, -4.0), v(8.0, -4.0), v(-4.0, 8.0)],
+            &opaque,
+            ALL,
+        );
+        assert!(r.resolve().iter().all(|p| p[3] == 255));
+    }
+
     #[test]
     fn perspective_correct_texture_sampling() {
         // A 2×1 texture: left half red, right half green, on a quad that
