@@ -501,6 +501,16 @@ impl ViewFrustum {
     pub fn intersects_sphere(&self, c: DVec3, r: f64) -> bool {
         self.distance(c) <= r
     }
+
+    /// True when the sphere `(c, r)` lies inside the frustum with a margin
+    /// of `1e-9·(1 + r)`: every point within that margin of the sphere is
+    /// inside too (a sphere within it whose containment was rounded).
+    pub fn contains_sphere(&self, c: DVec3, r: f64) -> bool {
+        let w = c - self.eye;
+        let x = DVec3::new(w.dot(self.right), w.dot(self.up), w.dot(self.fwd));
+        let r = r + 1e-9 * (1.0 + r);
+        self.normals.iter().all(|n| n.dot(x) >= r)
+    }
 }
 
 /// Projected area of a sphere of radius `r` at distance `d` from the eye,

@@ -110,21 +110,33 @@ impl CostModel {
     ) -> Cost {
         let eye = f.eye();
         let mut cost = Cost::default();
-        h.walk(|n, node| {
-            if !f.intersects_sphere(node.sphere.center, node.sphere.radius) {
-                return false;
+        // A node whose sphere lies inside the frustum holds only objects
+        // inside it (their spheres lie in the node's, up to rounding the
+        // containment test's margin covers): they are not tested again.
+        let mut stack = vec![(0u32, false)];
+        while let Some((n, inside)) = stack.pop() {
+            let node = &h.nodes[n as usize];
+            let s = node.sphere;
+            let inside = inside || f.contains_sphere(s.center, s.radius);
+            if !inside && !f.intersects_sphere(s.center, s.radius) {
+                continue;
             }
-            if node.children.is_none() {
-                for &o in h.objects(n) {
-                    let s = &h.object_spheres[o as usize];
-                    if f.intersects_sphere(s.center, s.radius) && draw(o) {
-                        let ob = &scene.objects[o as usize];
-                        cost += self.object_view(ob, s.radius, eye.distance(s.center));
+            match node.children {
+                Some([l, r]) => {
+                    stack.push((r, inside));
+                    stack.push((l, inside));
+                }
+                None => {
+                    for &o in h.objects(n) {
+                        let s = &h.object_spheres[o as usize];
+                        if (inside || f.intersects_sphere(s.center, s.radius)) && draw(o) {
+                            let ob = &scene.objects[o as usize];
+                            cost += self.object_view(ob, s.radius, eye.distance(s.center));
+                        }
                     }
                 }
             }
-            true
-        });
+        }
         cost
     }
 

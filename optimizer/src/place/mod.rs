@@ -105,17 +105,48 @@ impl Prepared<'_> {
             ));
         }
         ctl.check()?;
+        // How many CPVs are real problems is measured on the problem views
+        // alone, beside the placement (whose greedy is mostly serial), so it
+        // adds little to the wall time.
+        let (precision, out) = rayon::join(
+            || views::cpv_precision(&ctx, &pv),
+            || self.place_from(&ctx, opts, &mut st, &counters, &pv, predicted),
+        );
+        let (placement, stats) = out?;
+        let stats = Stats {
+            cpv_precision: precision.map(|p| p.0),
+            cpv_precision_sampled: precision.map_or(0, |p| p.1),
+            peak_rss_bytes: peak_rss_bytes(),
+            ..stats
+        };
+        ctl.progress("placement", 1.0, "done");
+        Ok(PlaceOutput { placement, stats })
+    }
+
+    /// The placement of a job from its problem views `pv`, with the stats
+    /// of [`Self::run_stats`] (no precision yet).
+    fn place_from(
+        &self,
+        ctx: &Context,
+        opts: &PlaceOptions,
+        st: &mut Stages,
+        counters: &Counters,
+        pv: &ProblemViews,
+        predicted: u64,
+    ) -> Result<(Placement, Stats)> {
+        let job = self.job();
+        let ctl = &ctx.control;
         let method = job.method();
         if method == Method::EnvMap {
             st.begin("env_map", 0.1, "placing environment maps");
-            let em = crate::methods::env_map::place(&ctx, job, &pv, &counters);
+            let em = crate::methods::env_map::place(ctx, job, pv, counters);
             st.end("env_map");
             ctl.check()?;
             st.begin("placement", 0.97, "writing the placement");
             let placement = assemble(
-                &ctx,
+                ctx,
                 job,
-                &pv,
+                pv,
                 em.impostors,
                 em.cpv_impostors,
                 &em.cpv_cost,
@@ -123,9 +154,9 @@ impl Prepared<'_> {
                 0,
             );
             st.end("placement");
-            let stats = self.run_stats(&ctx, &counters, &pv, &placement, st.times);
-            ctl.progress("placement", 1.0, "done");
-            return Ok(PlaceOutput { placement, stats });
+            let stats =
+                self.run_stats(ctx, counters, pv, &placement, std::mem::take(&mut st.times));
+            return Ok((placement, stats));
         }
 
         st.begin(
@@ -133,7 +164,7 @@ impl Prepared<'_> {
             0.1,
             &format!("generating candidates for {} CPVs", pv.cpvs.len()),
         );
-        let cands = candidates::generate(&ctx, job, &pv);
+        let cands = candidates::generate(ctx, job, pv);
         st.end("candidates");
         ctl.check()?;
 
@@ -141,7 +172,7 @@ impl Prepared<'_> {
         st.begin("greedy", 0.2, &what);
         let total = pv.cpvs.len();
         let mut first_unsolved = None;
-        let mut sel = greedy::select_lazy(&ctx, job, &pv, &cands, &mut |unsolved| {
+        let mut sel = greedy::select_lazy(ctx, job, pv, &cands, &mut |unsolved| {
             let start = *first_unsolved.get_or_insert(unsolved.max(1));
             ctl.progress(
                 "greedy",
@@ -154,12 +185,12 @@ impl Prepared<'_> {
         ctl.check()?;
         if opts.prune || method == Method::ShaftsPrune {
             st.begin("prune", 0.96, "pruning");
-            greedy::prune(&ctx, &pv, &cands, &mut sel);
+            greedy::prune(ctx, pv, &cands, &mut sel);
             st.end("prune");
         }
 
         st.begin("placement", 0.97, "writing the placement");
-        let placement = build_placement(&ctx, job, &pv, &cands, &sel);
+        let placement = build_placement(ctx, job, pv, &cands, &sel);
         st.end("placement");
 
         let stats = Stats {
@@ -174,13 +205,13 @@ impl Prepared<'_> {
             evaluations_per_choice: sel.evaluations as f64 / sel.accepted.max(1) as f64,
             predicted_peak_bytes: predicted,
             pruned: sel.pruned,
-            ..self.run_stats(&ctx, &counters, &pv, &placement, st.times)
+            ..self.run_stats(ctx, counters, pv, &placement, std::mem::take(&mut st.times))
         };
-        ctl.progress("placement", 1.0, "done");
-        Ok(PlaceOutput { placement, stats })
+        Ok((placement, stats))
     }
 
-    /// The counters every method reports (candidate and greedy counters zero).
+    /// The counters every method reports (candidate and greedy counters
+    /// zero; the precision is measured beside the placement).
     fn run_stats(
         &self,
         ctx: &Context,
@@ -189,7 +220,6 @@ impl Prepared<'_> {
         placement: &Placement,
         seconds: Vec<StageTime>,
     ) -> Stats {
-        let precision = crate::views::cpv_precision(ctx, pv);
         Stats {
             threads: rayon::current_num_threads(),
             objects: ctx.scene.objects.len() as u64,
@@ -200,8 +230,6 @@ impl Prepared<'_> {
             enclosing_frusta: pv.cone_evaluations,
             cpvs: pv.cpvs.len() as u64,
             cpvs_refined_away: pv.refined_away,
-            cpv_precision: precision.map(|p| p.0),
-            cpv_precision_sampled: precision.map_or(0, |p| p.1),
             impostors: placement.summary.impostors,
             memory_bytes: placement.summary.memory_bytes,
             unsolved_cpvs: placement.summary.unsolved_cpvs,

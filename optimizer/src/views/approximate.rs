@@ -241,13 +241,15 @@ impl Parts {
     /// Adds every part of `region` (the cell), halved `levels.split` times,
     /// from which some view in `vdi` may exceed the target (parts proven
     /// with the VDI's finest directions left out); true when there is one,
-    /// false when every part is proven and the VDI can be dropped. The costs
-    /// stay the cell's (closest distances, levels of detail and the visible
-    /// set of the whole cell), which are conservative for its parts.
+    /// false when refinement proves the VDI from the whole cell or every
+    /// part is proven, so the VDI can be dropped. The costs stay the cell's
+    /// (closest distances, levels of detail and the visible set of the whole
+    /// cell), which are conservative for its parts.
     ///
-    /// Once the union of unproven parts is the whole cell, a VDI is kept
-    /// untested (splitting could only drop it: conservative). Otherwise the
-    /// finest directions the cell leaves unproven are found once (a part
+    /// Once the union of unproven parts is the whole cell, a VDI is only
+    /// refined from the cell (splitting could only drop it: conservative).
+    /// Otherwise the finest directions the cell leaves unproven are found
+    /// once, by the same refinement (a part
     /// only has to prove those), then the last unproven part and the cell's
     /// corner parts are tried first, so that the union spans the cell after
     /// a few tests where the problem is real; then a part inside the union
@@ -264,10 +266,11 @@ impl Parts {
     ) -> bool {
         let depth = levels.split;
         if self.covers(region) {
-            return true;
+            // Only whether refinement proves the VDI matters now.
+            return !proven_by_refinement(ctx, costs, region, vdi, levels.refine, cones);
         }
         self.directions.clear();
-        unproven_directions(
+        if !unproven_directions(
             ctx,
             costs,
             region,
@@ -275,7 +278,10 @@ impl Parts {
             levels.refine,
             cones,
             Some(&mut self.directions),
-        );
+        ) {
+            // Refinement proves it from the whole cell.
+            return false;
+        }
         self.proven.clear();
         let mut found = false;
         let first: Vec<Aabb> = self.last.iter().chain(&self.corners).copied().collect();
@@ -371,17 +377,18 @@ fn process(
         None => {
             // Problem views of minimum size that a finer subdivision proves
             // are dropped.
-            let before = problems.len() as u64;
-            problems.retain(|vdi| {
-                !proven_by_refinement(ctx, &costs, &region, vdi, levels.refine, &mut cones)
-            });
             // The cell's parts where each remaining problem view may still
             // exceed the target; the CPVs of the cell share the smallest box
             // holding them all as their region, so where a problem ends
             // inside a cell the grid's phase matters less.
+            let before = problems.len() as u64;
             let mut parts = Parts::new(&region, levels.split);
             if levels.refine > 0 && levels.split > 0 {
                 problems.retain(|vdi| parts.add(ctx, &costs, &region, vdi, levels, &mut cones));
+            } else {
+                problems.retain(|vdi| {
+                    !proven_by_refinement(ctx, &costs, &region, vdi, levels.refine, &mut cones)
+                });
             }
             let refined = before - problems.len() as u64;
             if problems.is_empty() {
