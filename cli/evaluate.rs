@@ -7,8 +7,9 @@ use std::process::ExitCode;
 use clap::Args;
 use optimizer::api::placement::Placement;
 use optimizer::evaluate::EvalOptions;
-use optimizer::evaluate::images::{ImageOptions, LayerSource};
+use optimizer::evaluate::images::{ImageOptions, LayerSource, MAX_IMAGE_VIEWS};
 use optimizer::input::GeometryUse;
+use optimizer::input::files::{MAX_PLACEMENT_BYTES, MAX_SCENE_BYTES, read_file};
 use optimizer::{Error, Result};
 
 use crate::output::{write_json, write_output};
@@ -35,7 +36,9 @@ pub struct EvaluateArgs {
     seed: u64,
     /// Also render this many views in CPVs with impostors twice (all
     /// geometry; geometry with the impostors) and report the image error.
-    #[arg(long, default_value_t = 0)]
+    /// At most 10,000 (each view takes about a second).
+    #[arg(long, default_value_t = 0,
+          value_parser = clap::value_parser!(u32).range(0..=i64::from(MAX_IMAGE_VIEWS)))]
     images: u32,
     /// Baked impostors (GLB from `bake`) for --images; default: bake in memory.
     #[arg(long)]
@@ -61,7 +64,7 @@ pub struct EvaluateArgs {
 
 /// Reads a placement file.
 pub fn read_placement(path: &std::path::Path) -> Result<Placement> {
-    let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+    let bytes = read_file(path, MAX_PLACEMENT_BYTES, "placement")?;
     serde_json::from_slice(&bytes).map_err(|e| {
         Error::bad(
             path.display().to_string(),
@@ -118,7 +121,7 @@ pub fn run(a: EvaluateArgs) -> Result<ExitCode> {
     if a.images > 0 {
         let glb = match &a.impostors {
             Some(path) => Some((
-                std::fs::read(path).map_err(|e| Error::io(path, e))?,
+                read_file(path, MAX_SCENE_BYTES, "GLB of impostors")?,
                 path.display().to_string(),
             )),
             None => None,

@@ -117,7 +117,8 @@ impl SceneJob {
 
 /// Reads and validates a job file.
 fn read_job(path: &Path) -> Result<Job> {
-    let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+    let bytes =
+        optimizer::input::files::read_file(path, optimizer::input::files::MAX_JOB_BYTES, "job")?;
     Job::from_json(&bytes, &path.display().to_string())
 }
 

@@ -46,7 +46,11 @@ pub struct ReportArgs {
 
 pub fn run(a: ReportArgs) -> Result<ExitCode> {
     let job_name = a.input.job_name();
-    let text = std::fs::read(&a.input.job).map_err(|e| Error::io(&a.input.job, e))?;
+    let text = optimizer::input::files::read_file(
+        &a.input.job,
+        optimizer::input::files::MAX_JOB_BYTES,
+        "job",
+    )?;
     let parsed = Job::from_json(&text, &job_name)?;
     let job_value: serde_json::Value = serde_json::from_slice(&text)
         .map_err(|e| Error::bad(&job_name, format!("invalid job JSON: {e}")))?;

@@ -5,6 +5,7 @@ mod architecture;
 mod bad_input;
 mod bake;
 mod cli;
+mod corpus;
 mod golden;
 mod real_scenes;
 mod report;

@@ -131,6 +131,8 @@ pub(crate) fn run_job(dir: &Path, opts: &RunOptions<'_>) -> optimizer::Result<St
         cancel: Some(opts.cancel),
         observer: Some(&observer),
     };
+    // Loading a large scene takes a while: a cancel during it stops here.
+    ctl.check()?;
     let eval = EvalOptions {
         views: opts.eval_views,
         cpv_views: opts.eval_views,
@@ -161,6 +163,9 @@ pub(crate) fn run_job(dir: &Path, opts: &RunOptions<'_>) -> optimizer::Result<St
             &optimizer::bake::BakeOptions::default(),
             "placement",
         )?;
+        // The bake does not stop part-way: a cancel during it is honoured
+        // here (and by the worker, which ends a cancelled job `cancelled`).
+        ctl.check()?;
         write_atomic(&dir.join("impostors.glb"), &glb).map_err(io(dir.join("impostors.glb")))?;
     }
     let summary = JobSummary {

@@ -23,6 +23,7 @@
 //! than the impostors looked at nothing.
 
 use std::collections::HashMap;
+use std::sync::Mutex;
 
 use glam::DVec3;
 use rayon::prelude::*;
@@ -526,8 +527,12 @@ struct Compared {
     psnr: f64,
     coverage: f64,
     worst: WorstView,
-    pair: ImagePair,
 }
+
+/// Most views `--images` may compare: each is rendered four times at 3×3
+/// samples a pixel (about a second at 1280×720); only the worst view's
+/// images are held, so memory does not grow with the count.
+pub const MAX_IMAGE_VIEWS: u32 = 10_000;
 
 /// Compares geometry-only and impostor renders at views sampled in the CPVs
 /// that use impostors, over the impostor pixels, with the magenta control.
@@ -543,10 +548,13 @@ pub fn image_error(
     opts: &ImageOptions,
     caster: Option<&RayCaster>,
 ) -> Result<(ImageReport, Option<ImagePair>)> {
-    if opts.views > 100_000 {
+    if opts.views > MAX_IMAGE_VIEWS {
         return Err(Error::bad(
             "--images",
-            format!("{} views is too many (at most 100000)", opts.views),
+            format!(
+                "{} views is too many (at most {MAX_IMAGE_VIEWS}; each takes about a second)",
+                opts.views
+            ),
         ));
     }
     if !(0.0..=1.0).contains(&opts.min_coverage) {
@@ -596,9 +604,13 @@ pub fn image_error(
     let n = placement.impostors.len();
     let (real_by, control_by) = (by_impostor(&layers, n), by_impostor(&control, n));
     let renderer = Renderer::new(geom);
+    // Only the worst view's images are kept (the largest mismatch, the
+    // earliest of equal ones), whatever the order views finish in.
+    let worst_pair: Mutex<Option<(f64, usize, ImagePair)>> = Mutex::new(None);
     let results: Vec<Option<Compared>> = chosen
         .par_iter()
-        .map(|c| {
+        .enumerate()
+        .map(|(k, c)| {
             let cpv = &placement.cpvs[c.cpv as usize];
             let view =
                 View::perspective(c.eye, c.dir, job.camera.fov_deg, w * SAMPLES, h * SAMPLES);
@@ -632,9 +644,26 @@ pub fn image_error(
             let mismatched = mismatch_map(&a, &b, w, h, opts.tolerance, &mask);
             let mismatch = share_of(&mismatched, &mask);
             let psnr = psnr_db(&a, &b, &mask);
+            let control = mismatch_fraction(&a, &m, w, h, opts.tolerance, &mask);
+            {
+                let mut kept = worst_pair.lock().unwrap_or_else(|e| e.into_inner());
+                if kept.as_ref().is_none_or(|(x, j, _)| {
+                    mismatch.total_cmp(x).then(j.cmp(&k)) == std::cmp::Ordering::Greater
+                }) {
+                    let pair = ImagePair {
+                        width: w,
+                        height: h,
+                        geometry: a,
+                        impostors: b,
+                        footprint: mask,
+                        mismatched,
+                    };
+                    *kept = Some((mismatch, k, pair));
+                }
+            }
             Some(Compared {
                 mismatch,
-                control: mismatch_fraction(&a, &m, w, h, opts.tolerance, &mask),
+                control,
                 psnr,
                 coverage,
                 worst: WorstView {
@@ -645,14 +674,6 @@ pub fn image_error(
                     mismatch_fraction: mismatch,
                     impostor_pixel_fraction: coverage,
                     psnr_db: psnr,
-                },
-                pair: ImagePair {
-                    width: w,
-                    height: h,
-                    geometry: a,
-                    impostors: b,
-                    footprint: mask,
-                    mismatched,
                 },
             })
         })
@@ -688,7 +709,10 @@ pub fn image_error(
     report.control_mismatch_fraction = spread(|r| r.control);
     report.impostor_pixel_fraction = mean(|r| r.coverage);
     report.worst_view = Some(results[worst].worst.clone());
-    let pair = results.into_iter().nth(worst).map(|r| r.pair);
+    let pair = worst_pair
+        .into_inner()
+        .unwrap_or_else(|e| e.into_inner())
+        .map(|(_, _, pair)| pair);
     Ok((report, pair))
 }
 

@@ -83,8 +83,9 @@ pub struct Texture {
     pub width: u32,
     /// Height, texels.
     pub height: u32,
-    /// RGBA8 (sRGB colour), rows from the top.
-    pub rgba: Vec<u8>,
+    /// RGBA8 (sRGB colour), rows from the top; shared by the textures of
+    /// one image.
+    pub rgba: std::sync::Arc<[u8]>,
     /// Wrapping of `u`.
     pub wrap_s: Wrap,
     /// Wrapping of `v`.
@@ -110,7 +111,8 @@ impl SceneGeometry {
 /// it). A JSON scene summary has no geometry: that is an error.
 pub fn load_geometry_file(path: &Path) -> Result<SceneGeometry> {
     let source = path.display().to_string();
-    let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+    let bytes =
+        crate::input::files::read_file(path, crate::input::files::MAX_SCENE_BYTES, "scene")?;
     load(&bytes, &source, Some(base_dir_of(path)))
 }
 
@@ -149,9 +151,11 @@ fn load_inner(bytes: &[u8], source: &str, base_dir: Option<&Path>) -> Result<Sce
     let buffers = resolve_buffers(&doc, blob.as_deref(), source, base_dir)?;
     let scene_instances = walk_scene(&doc, source)?;
 
-    // Textures used as base colour, decoded once per image.
+    // Textures used as base colour; each image is decoded once, however
+    // many textures use it.
     let mut textures = Vec::new();
     let mut texture_of: Vec<Option<u32>> = vec![None; doc.textures().len()];
+    let mut image_of: Vec<Option<Decoded>> = vec![None; doc.images().len()];
     let mut materials = Vec::with_capacity(doc.materials().len() + 1);
     for m in doc.materials() {
         let pbr = m.pbr_metallic_roughness();
@@ -164,7 +168,12 @@ fn load_inner(bytes: &[u8], source: &str, base_dir: Option<&Path>) -> Result<Sce
                     t.index(),
                     t.source().index()
                 );
-                let (width, height, rgba) = decode_image(&t.source(), &buffers, base_dir, &what)?;
+                let image = t.source().index();
+                if image_of[image].is_none() {
+                    let (w, h, rgba) = decode_image(&t.source(), &buffers, base_dir, &what)?;
+                    image_of[image] = Some((w, h, rgba.into()));
+                }
+                let (width, height, rgba) = image_of[image].clone().expect("decoded above");
                 let s = t.sampler();
                 textures.push(Texture {
                     width,
@@ -234,6 +243,9 @@ fn load_inner(bytes: &[u8], source: &str, base_dir: Option<&Path>) -> Result<Sce
         objects: scene_instances.len(),
     })
 }
+
+/// An image's width, height and RGBA8 pixels, shared by its textures.
+type Decoded = (u32, u32, std::sync::Arc<[u8]>);
 
 fn wrap(m: gltf::texture::WrappingMode) -> Wrap {
     match m {
@@ -669,8 +681,55 @@ mod tests {
         assert!(!mat.unlit);
         let t = &geom.textures[mat.base_color_texture.unwrap() as usize];
         assert_eq!((t.width, t.height), (2, 2));
-        assert_eq!(t.rgba, texels);
+        assert_eq!(*t.rgba, texels[..]);
         assert_eq!(t.wrap_s, Wrap::ClampToEdge);
+    }
+
+    /// Textures that share an image share its decoded pixels, whatever
+    /// their samplers: the image is decoded once (24 textures over one
+    /// 8192² image would otherwise hold 24 × 256 MB).
+    #[test]
+    fn textures_of_one_image_share_its_pixels() {
+        use crate::scene::glb::{self, GlbBuilder, Node, Sampler};
+        use crate::scene::material;
+        let png = crate::bake::encode_png(&[9u8; 16], 2, 2).unwrap();
+        let mut b = GlbBuilder::new();
+        let image = b.add_image_png("t", &png).unwrap();
+        let clamp = b.add_sampler(&Sampler::linear_clamp()).unwrap();
+        let repeat = b.add_sampler(&Sampler::default()).unwrap();
+        let positions = [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [1.0, 1.0, 0.0]];
+        let uvs = [[0.0, 1.0], [1.0, 1.0], [1.0, 0.0]];
+        let mut prims = Vec::new();
+        for k in 0..24 {
+            let sampler = if k % 2 == 0 { clamp } else { repeat };
+            let texture = b.add_texture(image, Some(sampler)).unwrap();
+            let mut m = material::Material::new(format!("m{k}"), [1.0; 4]);
+            m.base_color_texture = Some(texture);
+            prims.push(b.add_material(&m).unwrap());
+        }
+        let g = glb::Geometry {
+            positions: &positions,
+            normals: None,
+            texcoords: Some(&uvs),
+            indices: &[0, 1, 2],
+        };
+        let parts: Vec<_> = prims.iter().map(|&m| (g, Some(m))).collect();
+        let mesh = b.add_mesh_from("tri", &parts).unwrap();
+        let n = b.add_node(Node::new("n").with_mesh(mesh)).unwrap();
+        b.set_scene_roots(&[n]).unwrap();
+        let geom = load_geometry_bytes(&b.finish(), "shared.glb").unwrap();
+        assert_eq!(geom.textures.len(), 24);
+        let first = &geom.textures[0].rgba;
+        assert_eq!(**first, [9u8; 16]);
+        assert!(
+            geom.textures
+                .iter()
+                .all(|t| std::sync::Arc::ptr_eq(&t.rgba, first))
+        );
+        assert_eq!(
+            geom.textures[1].wrap_s,
+            crate::scene::material::Wrap::Repeat
+        );
     }
 
     #[test]

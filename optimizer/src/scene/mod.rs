@@ -43,6 +43,11 @@ pub struct Object {
 /// Most levels of detail an object may have.
 pub const MAX_LODS: usize = 32;
 
+/// Most triangles one object (or one of its levels) may have: 2³², far
+/// above any mesh a renderer draws, and low enough that the sums over a
+/// scene's objects cannot overflow.
+pub const MAX_OBJECT_TRIANGLES: u64 = 1 << 32;
+
 impl Object {
     /// Centre of the bounding box (also the centre of the bounding sphere).
     pub fn center(&self) -> DVec3 {
@@ -64,7 +69,8 @@ pub struct Scene {
 
 impl Scene {
     /// Checks the invariants every stage relies on: at least one object,
-    /// finite bounds with `min <= max`. `source` names the input in errors.
+    /// finite bounds with `min <= max`, at most [`MAX_OBJECT_TRIANGLES`]
+    /// triangles an object. `source` names the input in errors.
     pub fn validate(&self, source: &str) -> Result<()> {
         if self.objects.is_empty() {
             return Err(Error::bad(
@@ -91,6 +97,20 @@ impl Scene {
                     "coordinates beyond 1e9 m",
                 ));
             }
+            if o.triangles > MAX_OBJECT_TRIANGLES
+                || o.lods.iter().any(|l| l.triangles > MAX_OBJECT_TRIANGLES)
+            {
+                return Err(Error::bad(
+                    format!("{source}: object {id} ({})", o.name),
+                    format!(
+                        "{} triangles: an object (and each of its levels) may have at most {MAX_OBJECT_TRIANGLES}",
+                        o.lods
+                            .iter()
+                            .map(|l| l.triangles)
+                            .fold(o.triangles, u64::max)
+                    ),
+                ));
+            }
             validate_lods(o)
                 .map_err(|m| Error::bad(format!("{source}: object {id} ({}): lods", o.name), m))?;
         }
@@ -115,7 +135,9 @@ impl Scene {
 
     /// Total triangles over all objects.
     pub fn total_triangles(&self) -> u64 {
-        self.objects.iter().map(|o| o.triangles).sum()
+        self.objects
+            .iter()
+            .fold(0u64, |acc, o| acc.saturating_add(o.triangles))
     }
 
     /// The JSON scene summary of this scene.

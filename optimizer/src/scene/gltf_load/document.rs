@@ -5,7 +5,8 @@
 use super::*;
 
 /// Checks the GLB header ourselves (a `length` below 12 overflows inside
-/// `gltf`), with clearer messages for truncated files.
+/// `gltf`), with clearer messages for truncated files; the header's length
+/// must be the file's (glTF 2.0 §4.4.2: the total length of the GLB).
 pub(crate) fn check_glb_header(bytes: &[u8], source: &str) -> Result<()> {
     if !bytes.starts_with(b"glTF") {
         return Ok(());
@@ -40,6 +41,16 @@ pub(crate) fn check_glb_header(bytes: &[u8], source: &str) -> Result<()> {
             source,
             format!(
                 "truncated GLB: the header says {length} bytes but there are only {}",
+                bytes.len()
+            ),
+        ));
+    }
+    if length < bytes.len() {
+        return Err(Error::bad(
+            source,
+            format!(
+                "malformed GLB: the header says {length} bytes but the file has {} \
+                 (data after the GLB's end)",
                 bytes.len()
             ),
         ));

@@ -137,7 +137,8 @@ const APPEARANCE_EXTENSIONS: &[&str] = &[
 ///
 /// Errors name the file as given.
 pub fn load_scene_file(path: &Path) -> Result<Scene> {
-    let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+    let bytes =
+        crate::input::files::read_file(path, crate::input::files::MAX_SCENE_BYTES, "scene")?;
     load_scene_file_bytes(&bytes, path)
 }
 
