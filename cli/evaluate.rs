@@ -8,8 +8,8 @@ use clap::Args;
 use optimizer::api::placement::Placement;
 use optimizer::evaluate::EvalOptions;
 use optimizer::evaluate::images::{ImageOptions, LayerSource, MAX_IMAGE_VIEWS};
+use optimizer::files::{MAX_PLACEMENT_BYTES, MAX_SCENE_BYTES, read_file};
 use optimizer::input::GeometryUse;
-use optimizer::input::files::{MAX_PLACEMENT_BYTES, MAX_SCENE_BYTES, read_file};
 use optimizer::{Error, Result};
 
 use crate::output::{write_json, write_output};

@@ -117,8 +117,7 @@ impl SceneJob {
 
 /// Reads and validates a job file.
 fn read_job(path: &Path) -> Result<Job> {
-    let bytes =
-        optimizer::input::files::read_file(path, optimizer::input::files::MAX_JOB_BYTES, "job")?;
+    let bytes = optimizer::files::read_file(path, optimizer::files::MAX_JOB_BYTES, "job")?;
     Job::from_json(&bytes, &path.display().to_string())
 }
 

@@ -46,11 +46,7 @@ pub struct ReportArgs {
 
 pub fn run(a: ReportArgs) -> Result<ExitCode> {
     let job_name = a.input.job_name();
-    let text = optimizer::input::files::read_file(
-        &a.input.job,
-        optimizer::input::files::MAX_JOB_BYTES,
-        "job",
-    )?;
+    let text = optimizer::files::read_file(&a.input.job, optimizer::files::MAX_JOB_BYTES, "job")?;
     let parsed = Job::from_json(&text, &job_name)?;
     let job_value: serde_json::Value = serde_json::from_slice(&text)
         .map_err(|e| Error::bad(&job_name, format!("invalid job JSON: {e}")))?;

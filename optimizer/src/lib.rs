@@ -18,6 +18,7 @@ pub mod citygen;
 pub mod control;
 pub mod error;
 pub mod evaluate;
+pub mod files;
 pub mod greedy;
 pub mod input;
 pub mod math;

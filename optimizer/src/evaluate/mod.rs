@@ -16,6 +16,7 @@
 //! find objects that are actually visible; any such object missing from the
 //! set is counted in `visibility.missed_objects` (0 in conservative mode).
 
+mod compare;
 pub mod images;
 mod index;
 mod parallax;

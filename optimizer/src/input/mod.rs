@@ -24,7 +24,6 @@
 //! # }
 //! ```
 
-pub mod files;
 mod prepared;
 
 pub use prepared::Prepared;
@@ -120,7 +119,7 @@ impl<'a> Load<'a> {
 }
 
 /// The bytes of `source` and its name; a file is read within `limit` bytes
-/// ([`files::read_file`]), `what` naming its kind.
+/// ([`crate::files::read_file`]), `what` naming its kind.
 fn read<'s>(
     source: Source<'s>,
     limit: u64,
@@ -128,7 +127,7 @@ fn read<'s>(
 ) -> Result<(std::borrow::Cow<'s, [u8]>, String)> {
     Ok(match source {
         Source::File(p) => (
-            files::read_file(p, limit, what)?.into(),
+            crate::files::read_file(p, limit, what)?.into(),
             p.display().to_string(),
         ),
         Source::Bytes { bytes, name } => (bytes.into(), name.to_string()),
@@ -148,7 +147,7 @@ impl SceneInput {
     /// occluders, ray caster, hierarchy). Errors about the job name it
     /// `job_name`; errors about a file name the file.
     pub fn load(load: &Load<'_>, job: &Job, job_name: &str) -> Result<SceneInput> {
-        let (bytes, name) = read(load.scene, files::MAX_SCENE_BYTES, "scene")?;
+        let (bytes, name) = read(load.scene, crate::files::MAX_SCENE_BYTES, "scene")?;
         let (scene, summary) = match load.scene {
             Source::File(p) => (
                 gltf_load::load_scene_file_bytes(&bytes, p)?,
@@ -177,7 +176,7 @@ impl SceneInput {
         drop(bytes);
         let pvs = match load.pvs {
             Some(src) => {
-                let (bytes, name) = read(src, files::MAX_PLACEMENT_BYTES, "PVS")?;
+                let (bytes, name) = read(src, crate::files::MAX_PLACEMENT_BYTES, "PVS")?;
                 Some(PvsFile::from_json(&bytes, &name)?)
             }
             None => None,

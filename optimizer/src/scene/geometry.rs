@@ -111,8 +111,7 @@ impl SceneGeometry {
 /// it). A JSON scene summary has no geometry: that is an error.
 pub fn load_geometry_file(path: &Path) -> Result<SceneGeometry> {
     let source = path.display().to_string();
-    let bytes =
-        crate::input::files::read_file(path, crate::input::files::MAX_SCENE_BYTES, "scene")?;
+    let bytes = crate::files::read_file(path, crate::files::MAX_SCENE_BYTES, "scene")?;
     load(&bytes, &source, Some(base_dir_of(path)))
 }
 

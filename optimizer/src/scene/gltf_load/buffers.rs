@@ -98,7 +98,7 @@ pub(crate) fn read_uri(uri: &str, what: &str, base_dir: Option<&Path>) -> Result
         ));
     }
     let path = base_dir.join(relative);
-    crate::input::files::read_file(&path, crate::input::files::MAX_SCENE_BYTES, "glTF resource")
+    crate::files::read_file(&path, crate::files::MAX_SCENE_BYTES, "glTF resource")
 }
 
 /// Decodes the part of a `data:` URI after `data:`.

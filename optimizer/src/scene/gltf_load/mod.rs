@@ -137,8 +137,7 @@ const APPEARANCE_EXTENSIONS: &[&str] = &[
 ///
 /// Errors name the file as given.
 pub fn load_scene_file(path: &Path) -> Result<Scene> {
-    let bytes =
-        crate::input::files::read_file(path, crate::input::files::MAX_SCENE_BYTES, "scene")?;
+    let bytes = crate::files::read_file(path, crate::files::MAX_SCENE_BYTES, "scene")?;
     load_scene_file_bytes(&bytes, path)
 }
 
