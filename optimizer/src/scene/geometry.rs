@@ -34,6 +34,11 @@ use crate::{Error, Result};
 /// The largest decoded image side, texels.
 pub const MAX_IMAGE_SIDE: u32 = 8192;
 
+/// The most bytes a scene's decoded images may take together (RGBA8):
+/// 4 GiB, sixteen images of the largest size. Checked from each image's
+/// header before it is decoded.
+pub const MAX_DECODED_IMAGE_BYTES: u64 = 4 << 30;
+
 /// A scene's renderable geometry.
 #[derive(Clone, Debug, Default)]
 pub struct SceneGeometry {
@@ -155,6 +160,7 @@ fn load_inner(bytes: &[u8], source: &str, base_dir: Option<&Path>) -> Result<Sce
     let mut textures = Vec::new();
     let mut texture_of: Vec<Option<u32>> = vec![None; doc.textures().len()];
     let mut image_of: Vec<Option<Decoded>> = vec![None; doc.images().len()];
+    let mut image_budget = MAX_DECODED_IMAGE_BYTES;
     let mut materials = Vec::with_capacity(doc.materials().len() + 1);
     for m in doc.materials() {
         let pbr = m.pbr_metallic_roughness();
@@ -169,7 +175,8 @@ fn load_inner(bytes: &[u8], source: &str, base_dir: Option<&Path>) -> Result<Sce
                 );
                 let image = t.source().index();
                 if image_of[image].is_none() {
-                    let (w, h, rgba) = decode_image(&t.source(), &buffers, base_dir, &what)?;
+                    let (w, h, rgba) =
+                        decode_image(&t.source(), &buffers, base_dir, &what, &mut image_budget)?;
                     image_of[image] = Some((w, h, rgba.into()));
                 }
                 let (width, height, rgba) = image_of[image].clone().expect("decoded above");
@@ -255,12 +262,15 @@ fn wrap(m: gltf::texture::WrappingMode) -> Wrap {
 }
 
 /// The bytes of an image: a buffer view, a base64 `data:` URI or (for local
-/// files) a relative path; decoded to RGBA8 with its size checked first.
+/// files) a relative path; decoded to RGBA8 with its size checked first,
+/// against [`MAX_IMAGE_SIDE`] and against `budget`, the bytes the scene's
+/// images may still take (reduced by this one's).
 fn decode_image(
     image: &gltf::Image,
     buffers: &[Cow<'_, [u8]>],
     base_dir: Option<&Path>,
     what: &str,
+    budget: &mut u64,
 ) -> Result<(u32, u32, Vec<u8>)> {
     let bytes: Cow<[u8]> = match image.source() {
         gltf::image::Source::View { view, .. } => {
@@ -315,6 +325,17 @@ fn decode_image(
             format!("image size {w} × {h} is outside 1 … {MAX_IMAGE_SIDE} per side"),
         ));
     }
+    let size = 4 * u64::from(w) * u64::from(h);
+    if size > *budget {
+        return Err(Error::bad(
+            what,
+            format!(
+                "the scene's images decode to more than {} GiB together (this one {w} × {h})",
+                MAX_DECODED_IMAGE_BYTES >> 30
+            ),
+        ));
+    }
+    *budget -= size;
     let mut reader = image::ImageReader::new(Cursor::new(&*bytes))
         .with_guessed_format()
         .map_err(|e| Error::bad(what, format!("unreadable image: {e}")))?;

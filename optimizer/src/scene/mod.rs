@@ -43,6 +43,10 @@ pub struct Object {
 /// Most levels of detail an object may have.
 pub const MAX_LODS: usize = 32;
 
+/// Most objects a scene may have: 2²², four million (a large game map has
+/// tens of thousands); checked before any per-object work.
+pub const MAX_OBJECTS: usize = 1 << 22;
+
 /// Most triangles one object (or one of its levels) may have: 2³², far
 /// above any mesh a renderer draws, and low enough that the sums over a
 /// scene's objects cannot overflow.
@@ -76,6 +80,15 @@ impl Scene {
             return Err(Error::bad(
                 source,
                 "the scene has no objects (no node draws a mesh)",
+            ));
+        }
+        if self.objects.len() > MAX_OBJECTS {
+            return Err(Error::bad(
+                source,
+                format!(
+                    "the scene has {} objects, more than the {MAX_OBJECTS} a scene may have",
+                    self.objects.len()
+                ),
             ));
         }
         for (id, o) in self.objects.iter().enumerate() {

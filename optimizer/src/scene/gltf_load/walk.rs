@@ -175,6 +175,18 @@ pub(crate) fn walk_scene(doc: &gltf::Document, source: &str) -> Result<Vec<Insta
     let Some(scene) = doc.default_scene().or_else(|| doc.scenes().next()) else {
         return Ok(Vec::new());
     };
+    // Each node is reached at most once, so the objects are at most the
+    // nodes that draw a mesh: too many is refused before the walk.
+    let drawing = doc.nodes().filter(|n| n.mesh().is_some()).count();
+    if drawing > crate::scene::MAX_OBJECTS {
+        return Err(Error::bad(
+            source,
+            format!(
+                "{drawing} nodes draw a mesh, more than the {} objects a scene may have",
+                crate::scene::MAX_OBJECTS
+            ),
+        ));
+    }
     let nodes: Vec<gltf::Node> = doc.nodes().collect();
     let json_nodes = &doc.as_json().nodes;
     let lod_ids = lod_ids(doc, source)?;
