@@ -241,6 +241,7 @@ fn jobs_predicted_beyond_the_memory_limit_are_refused() {
         "city-small.json",
         "GB",
         "problem views",
+        "objects",
         "target_frame_time_ms",
     ] {
         assert!(

@@ -94,12 +94,14 @@ impl Prepared<'_> {
             return Err(Error::bad(
                 self.job_name(),
                 format!(
-                    "the job needs about {:.1} GB ({} problem views listing {} (problem view, cluster) pairs), \
-                     more than the {:.1} GB available; raise target_frame_time_ms, enlarge \
-                     problem_views.cell_size or min_vdi_deg, or shrink the view space",
+                    "the job needs about {:.1} GB ({} problem views listing {} (problem view, cluster) pairs \
+                     over a scene of {} objects), more than the {:.1} GB available; raise \
+                     target_frame_time_ms, enlarge problem_views.cell_size or min_vdi_deg, shrink the \
+                     view space, or split the scene",
                     predicted as f64 / 1e9,
                     pv.cpvs.len(),
                     counters.pairs(),
+                    ctx.scene.objects.len(),
                     limit as f64 / 1e9
                 ),
             ));
