@@ -1,5 +1,5 @@
-//! Reading input files within stated limits: only regular files (a link is
-//! followed, but never to a device, pipe or directory: `/dev/zero` would
+//! Reading input files within stated limits: regular files and pipes (a
+//! link is followed, but never to a device or directory: `/dev/zero` would
 //! read until memory runs out), and never more bytes than the kind of file
 //! may have, checked before and while reading.
 
@@ -19,19 +19,20 @@ pub const MAX_JOB_BYTES: u64 = 64 << 20;
 /// Largest placement or PVS file: 4 GiB.
 pub const MAX_PLACEMENT_BYTES: u64 = 4 << 30;
 
-/// The bytes of the regular file at `path` (`what` names its kind in
-/// errors), at most `limit` of them. A path that is not a regular file (a
-/// device, pipe, socket or directory, also through a link) or holds more
-/// than `limit` bytes is bad input naming the path; the file is not read
-/// then. A file that grows past the limit while read is refused too.
+/// The bytes of the file at `path` (`what` names its kind in errors), at
+/// most `limit` of them. A regular file or a pipe (`--job <(…)`) is read;
+/// anything else (a device, socket or directory, also through a link) and a
+/// regular file of more than `limit` bytes is bad input naming the path,
+/// refused before it is read. A file or pipe that yields more than `limit`
+/// bytes while read is refused too.
 pub fn read_file(path: &Path, limit: u64, what: &str) -> Result<Vec<u8>> {
     let meta = std::fs::metadata(path).map_err(|e| Error::io(path, e))?;
     let shown = path.display().to_string();
-    if !meta.is_file() {
+    if !(meta.is_file() || is_pipe(&meta)) {
         let kind = if meta.is_dir() {
             "a directory"
         } else {
-            "a device, pipe or socket"
+            "a device or socket"
         };
         return Err(Error::bad(
             shown,
@@ -44,11 +45,15 @@ pub fn read_file(path: &Path, limit: u64, what: &str) -> Result<Vec<u8>> {
             format!("{n} bytes or more: a {what} may have at most {limit} bytes"),
         )
     };
-    if meta.len() > limit {
+    if meta.is_file() && meta.len() > limit {
         return Err(too_big(meta.len()));
     }
     let file = std::fs::File::open(path).map_err(|e| Error::io(path, e))?;
-    let mut bytes = Vec::with_capacity(meta.len() as usize);
+    let mut bytes = Vec::with_capacity(if meta.is_file() {
+        meta.len() as usize
+    } else {
+        0
+    });
     file.take(limit + 1)
         .read_to_end(&mut bytes)
         .map_err(|e| Error::io(path, e))?;
@@ -56,6 +61,16 @@ pub fn read_file(path: &Path, limit: u64, what: &str) -> Result<Vec<u8>> {
         return Err(too_big(bytes.len() as u64));
     }
     Ok(bytes)
+}
+
+#[cfg(unix)]
+fn is_pipe(meta: &std::fs::Metadata) -> bool {
+    std::os::unix::fs::FileTypeExt::is_fifo(&meta.file_type())
+}
+
+#[cfg(not(unix))]
+fn is_pipe(_: &std::fs::Metadata) -> bool {
+    false
 }
 
 #[cfg(test)]
@@ -88,6 +103,27 @@ mod tests {
             assert!(e.contains("zero.glb") && e.contains("device"), "{e}");
             let e = message(read_file(Path::new("/dev/zero"), MAX_JOB_BYTES, "job").unwrap_err());
             assert!(e.contains("not a regular file"), "{e}");
+            // A pipe is read, within the limit.
+            let fifo = dir.join("job.fifo");
+            let made = std::process::Command::new("mkfifo").arg(&fifo).status();
+            if made.is_ok_and(|s| s.success()) {
+                let writer = |n: usize| {
+                    let fifo = fifo.clone();
+                    std::thread::spawn(move || {
+                        use std::io::Write;
+                        let mut f = std::fs::OpenOptions::new().write(true).open(fifo).unwrap();
+                        // The reader may stop early: a broken pipe is fine.
+                        let _ = f.write_all(&vec![b'x'; n]);
+                    })
+                };
+                let w = writer(1000);
+                assert_eq!(read_file(&fifo, 1000, "job").unwrap().len(), 1000);
+                w.join().unwrap();
+                let w = writer(1001);
+                let e = message(read_file(&fifo, 1000, "job").unwrap_err());
+                assert!(e.contains("at most 1000 bytes"), "{e}");
+                w.join().unwrap();
+            }
         }
         std::fs::remove_dir_all(&dir).unwrap();
     }
