@@ -44,8 +44,32 @@ async fn main() -> std::io::Result<()> {
     let state = AppState::open(cfg)?;
     let listener = tokio::net::TcpListener::bind(&cli.listen).await?;
     tracing::info!("listening on {}", listener.local_addr()?);
-    run(listener, state, async {
+    run(listener, state, shutdown_signal()).await
+}
+
+/// Completes on Ctrl-C (SIGINT) or SIGTERM, what service managers and
+/// container runtimes send: the server stops accepting connections, answers
+/// those in flight and exits 0; a job still running is queued again when the
+/// server next starts on the same data folder.
+async fn shutdown_signal() {
+    let interrupt = async {
         let _ = tokio::signal::ctrl_c().await;
-    })
-    .await
+    };
+    #[cfg(unix)]
+    let terminate = async {
+        use tokio::signal::unix::{SignalKind, signal};
+        match signal(SignalKind::terminate()) {
+            Ok(mut s) => {
+                s.recv().await;
+            }
+            Err(_) => std::future::pending::<()>().await,
+        }
+    };
+    #[cfg(not(unix))]
+    let terminate = std::future::pending::<()>();
+    tokio::select! {
+        () = interrupt => {}
+        () = terminate => {}
+    }
+    tracing::info!("shutting down");
 }
