@@ -49,14 +49,17 @@ fn spawn(dir: &std::path::Path, addr: SocketAddr) -> Child {
     child
 }
 
+/// An empty data folder for test `name` and a free loopback address.
+fn fresh(name: &str) -> (std::path::PathBuf, SocketAddr) {
+    let dir = std::env::temp_dir().join(format!("impostor-{name}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    let l = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
+    (dir, l.local_addr().unwrap())
+}
+
 #[test]
 fn kill_9_and_restart_finishes_every_job() {
-    let dir = std::env::temp_dir().join(format!("impostor-restart-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    let addr: SocketAddr = {
-        let l = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
-        l.local_addr().unwrap()
-    };
+    let (dir, addr) = fresh("restart");
     let glb = optimizer::citygen::generate(&optimizer::citygen::CityParams {
         seed: 1,
         scale: 0.1,
@@ -147,12 +150,7 @@ fn kill_9_and_restart_finishes_every_job() {
 #[test]
 #[cfg(unix)]
 fn sigterm_stops_the_server_gracefully() {
-    let dir = std::env::temp_dir().join(format!("impostor-sigterm-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    let addr: SocketAddr = {
-        let l = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
-        l.local_addr().unwrap()
-    };
+    let (dir, addr) = fresh("sigterm");
     let mut child = spawn(&dir, addr);
     let sent = Command::new("kill")
         .args(["-TERM", &child.id().to_string()])

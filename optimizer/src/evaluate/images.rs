@@ -424,7 +424,6 @@ struct Compared {
     control: f64,
     psnr: f64,
     coverage: f64,
-    worst: WorstView,
 }
 
 /// Most views `--images` may compare: each is rendered four times at 3×3
@@ -502,9 +501,10 @@ pub fn image_error(
     let n = placement.impostors.len();
     let (real_by, control_by) = (by_impostor(&layers, n), by_impostor(&control, n));
     let renderer = Renderer::new(geom);
-    // Only the worst view's images are kept (the largest mismatch, the
-    // earliest of equal ones), whatever the order views finish in.
-    let worst_pair: Mutex<Option<(f64, usize, ImagePair)>> = Mutex::new(None);
+    // The worst view (the largest mismatch, the earliest of equal ones,
+    // whatever the order views finish in) is the only one whose images are
+    // kept.
+    let worst: Mutex<Option<(f64, usize, WorstView, ImagePair)>> = Mutex::new(None);
     let results: Vec<Option<Compared>> = chosen
         .par_iter()
         .enumerate()
@@ -543,28 +543,11 @@ pub fn image_error(
             let mismatch = share_of(&mismatched, &mask);
             let psnr = psnr_db(&a, &b, &mask);
             let control = mismatch_fraction(&a, &m, w, h, opts.tolerance, &mask);
-            {
-                let mut kept = worst_pair.lock().unwrap_or_else(|e| e.into_inner());
-                if kept.as_ref().is_none_or(|(x, j, _)| {
-                    mismatch.total_cmp(x).then(j.cmp(&k)) == std::cmp::Ordering::Greater
-                }) {
-                    let pair = ImagePair {
-                        width: w,
-                        height: h,
-                        geometry: a,
-                        impostors: b,
-                        footprint: mask,
-                        mismatched,
-                    };
-                    *kept = Some((mismatch, k, pair));
-                }
-            }
-            Some(Compared {
-                mismatch,
-                control,
-                psnr,
-                coverage,
-                worst: WorstView {
+            let mut kept = worst.lock().unwrap_or_else(|e| e.into_inner());
+            if kept.as_ref().is_none_or(|(x, j, ..)| {
+                mismatch.total_cmp(x).then(j.cmp(&k)) == std::cmp::Ordering::Greater
+            }) {
+                let view = WorstView {
                     view: c.index,
                     cpv: c.cpv,
                     eye: c.eye.to_array(),
@@ -572,7 +555,22 @@ pub fn image_error(
                     mismatch_fraction: mismatch,
                     impostor_pixel_fraction: coverage,
                     psnr_db: psnr,
-                },
+                };
+                let pair = ImagePair {
+                    width: w,
+                    height: h,
+                    geometry: a,
+                    impostors: b,
+                    footprint: mask,
+                    mismatched,
+                };
+                *kept = Some((mismatch, k, view, pair));
+            }
+            Some(Compared {
+                mismatch,
+                control,
+                psnr,
+                coverage,
             })
         })
         .collect();
@@ -583,12 +581,6 @@ pub fn image_error(
     }
     let n = results.len() as f64;
     let mean = |f: fn(&Compared) -> f64| results.iter().map(f).sum::<f64>() / n;
-    let worst = results
-        .iter()
-        .enumerate()
-        .max_by(|x, y| x.1.mismatch.total_cmp(&y.1.mismatch).then(y.0.cmp(&x.0)))
-        .map(|(i, _)| i)
-        .expect("non-empty");
     report.views = results.len() as u32;
     report.psnr_db = PsnrSpread {
         mean: mean(|r| r.psnr),
@@ -606,11 +598,12 @@ pub fn image_error(
     report.footprint_mismatch_fraction = spread(|r| r.mismatch);
     report.control_mismatch_fraction = spread(|r| r.control);
     report.impostor_pixel_fraction = mean(|r| r.coverage);
-    report.worst_view = Some(results[worst].worst.clone());
-    let pair = worst_pair
+    let (worst_view, pair) = worst
         .into_inner()
         .unwrap_or_else(|e| e.into_inner())
-        .map(|(_, _, pair)| pair);
+        .map(|(_, _, view, pair)| (view, pair))
+        .unzip();
+    report.worst_view = worst_view;
     Ok((report, pair))
 }
 

@@ -113,30 +113,23 @@ impl CostModel {
         // A node whose sphere lies inside the frustum holds only objects
         // inside it (their spheres lie in the node's, up to rounding the
         // containment test's margin covers): they are not tested again.
-        let mut stack = vec![(0u32, false)];
-        while let Some((n, inside)) = stack.pop() {
-            let node = &h.nodes[n as usize];
+        h.walk_with(false, |n, node, inside| {
             let s = node.sphere;
             let inside = inside || f.contains_sphere(s.center, s.radius);
             if !inside && !f.intersects_sphere(s.center, s.radius) {
-                continue;
+                return None;
             }
-            match node.children {
-                Some([l, r]) => {
-                    stack.push((r, inside));
-                    stack.push((l, inside));
-                }
-                None => {
-                    for &o in h.objects(n) {
-                        let s = &h.object_spheres[o as usize];
-                        if (inside || f.intersects_sphere(s.center, s.radius)) && draw(o) {
-                            let ob = &scene.objects[o as usize];
-                            cost += self.object_view(ob, s.radius, eye.distance(s.center));
-                        }
+            if node.children.is_none() {
+                for &o in h.objects(n) {
+                    let s = &h.object_spheres[o as usize];
+                    if (inside || f.intersects_sphere(s.center, s.radius)) && draw(o) {
+                        let ob = &scene.objects[o as usize];
+                        cost += self.object_view(ob, s.radius, eye.distance(s.center));
                     }
                 }
             }
-        }
+            Some(inside)
+        });
         cost
     }
 

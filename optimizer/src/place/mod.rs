@@ -115,6 +115,7 @@ impl Prepared<'_> {
             || self.place_from(&ctx, opts, &mut st, &counters, &pv, predicted),
         );
         let (placement, stats) = out?;
+        ctl.check()?;
         let stats = Stats {
             cpv_precision: precision.map(|p| p.0),
             cpv_precision_sampled: precision.map_or(0, |p| p.1),

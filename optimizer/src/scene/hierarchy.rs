@@ -210,14 +210,21 @@ impl Hierarchy {
     /// into its children (ignored for leaves, whose objects the caller reads
     /// with [`Hierarchy::objects`]).
     pub fn walk(&self, mut f: impl FnMut(u32, &Node) -> bool) {
-        let mut stack = vec![0u32];
-        while let Some(n) = stack.pop() {
+        self.walk_with((), |n, node, ()| f(n, node).then_some(()));
+    }
+
+    /// [`Hierarchy::walk`] passing state down: `f(id, node, s)` gets the
+    /// state its parent returned (`root` for the root) and returns the
+    /// state for its children, or `None` not to go into them.
+    pub fn walk_with<S: Copy>(&self, root: S, mut f: impl FnMut(u32, &Node, S) -> Option<S>) {
+        let mut stack = vec![(0u32, root)];
+        while let Some((n, s)) = stack.pop() {
             let node = &self.nodes[n as usize];
-            if f(n, node)
+            if let Some(down) = f(n, node, s)
                 && let Some([l, r]) = node.children
             {
-                stack.push(r);
-                stack.push(l);
+                stack.push((r, down));
+                stack.push((l, down));
             }
         }
     }

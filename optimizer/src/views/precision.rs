@@ -158,7 +158,8 @@ pub fn slowest_view_search(
 /// for its slowest view ([`slowest_view_search`]); `(precision, CPVs
 /// sampled)`, `None` when there is no CPV. A search can miss a CPV's
 /// slowest view, so this is a lower bound of the share of real problem
-/// views.
+/// views. Once the run is cancelled the remaining CPVs are skipped (the
+/// figure is then not reported).
 pub fn cpv_precision(ctx: &Context, pv: &ProblemViews) -> Option<(f64, u64)> {
     let n = pv.cpvs.len();
     if n == 0 {
@@ -169,6 +170,9 @@ pub fn cpv_precision(ctx: &Context, pv: &ProblemViews) -> Option<(f64, u64)> {
     let real = sampled
         .par_iter()
         .filter(|&&i| {
+            if ctx.cancelled() {
+                return false;
+            }
             let seed = 0x9e37_79b9_7f4a_7c15 ^ i as u64;
             slowest_view_search(ctx, pv, &pv.cpvs[i], ctx.t_max, seed) > ctx.t_max
         })
