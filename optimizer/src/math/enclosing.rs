@@ -81,6 +81,8 @@ pub enum Overlap {
 /// Bit of the floor plane in a [`Bounds`] mask (the side planes are bits
 /// `0..SIDE_PLANES`).
 const FLOOR_BIT: u32 = SIDE_PLANES as u32;
+/// The side planes' bits.
+const SIDE_MASK: u32 = (1 << SIDE_PLANES) - 1;
 /// Bit of the cone's mantle.
 const CONE_BIT: u32 = FLOOR_BIT + 1;
 /// First bit of the excluded cones.
@@ -109,11 +111,14 @@ impl Enclosing {
         if self.cone.all {
             return (Overlap::Inside, 0);
         }
+        // Only the bounds of `mask` are visited (its set bits, in order):
+        // deep in a walk a sphere has few left to test.
         let mut left = mask;
-        for (k, &(n, h)) in self.planes.iter().enumerate() {
-            if mask & (1 << k) == 0 {
-                continue;
-            }
+        let mut m = mask & SIDE_MASK;
+        while m != 0 {
+            let k = m.trailing_zeros();
+            m &= m - 1;
+            let (n, h) = self.planes[k as usize];
             let d = n.dot(c) - h;
             if d > r {
                 return (Overlap::Outside, 0);
@@ -132,25 +137,25 @@ impl Enclosing {
             }
         }
         if mask & (1 << CONE_BIT) != 0 {
-            let s = self.cone.signed_distance(c);
-            if s > r {
+            let (within, beyond) = self.cone.sphere_side(c, r, false);
+            if beyond {
                 return (Overlap::Outside, 0);
             }
-            if s <= -r {
+            if within {
                 left &= !(1 << CONE_BIT);
             }
         }
         if let Some(excluded) = &self.excluded {
-            for (k, e) in (EXCLUDED_BIT..).zip(excluded) {
-                if mask & (1 << k) == 0 {
-                    continue;
-                }
-                let s = e.signed_distance(c);
-                if s <= -r {
+            let mut m = mask >> EXCLUDED_BIT;
+            while m != 0 {
+                let k = m.trailing_zeros();
+                m &= m - 1;
+                let (within, beyond) = excluded[k as usize].sphere_side(c, r, true);
+                if within {
                     return (Overlap::Outside, 0);
                 }
-                if s >= r {
-                    left &= !(1 << k);
+                if beyond {
+                    left &= !(1 << (EXCLUDED_BIT + k));
                 }
             }
         }

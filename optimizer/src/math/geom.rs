@@ -341,6 +341,9 @@ pub struct Cone {
     pub axis: DVec3,
     cos: f64,
     sin: f64,
+    /// `cos²` and `sin²` of the half-angle, for [`Cone::sphere_side`].
+    cos2: f64,
+    sin2: f64,
     /// True when the cone covers all of space.
     pub all: bool,
     /// Points with `(p − apex)·axis < floor` are outside (a plane cutting
@@ -351,11 +354,14 @@ pub struct Cone {
 impl Cone {
     /// A cone; a half-angle of 90° or more covers all of space.
     pub fn new(apex: DVec3, axis: DVec3, half_angle: f64) -> Cone {
+        let (sin, cos) = (half_angle.sin(), half_angle.cos());
         Cone {
             apex,
             axis,
-            cos: half_angle.cos(),
-            sin: half_angle.sin(),
+            cos,
+            sin,
+            cos2: cos * cos,
+            sin2: sin * sin,
             all: half_angle >= FRAC_PI_2 - 1e-9,
             floor: 0.0,
         }
@@ -380,6 +386,38 @@ impl Cone {
         }
         let t = par * self.cos + perp * self.sin;
         if t >= 0.0 { s } else { v.length() }
+    }
+
+    /// Where the sphere `(c, r)`, `r ≥ 0`, lies against the cone's mantle
+    /// (ignoring the floor plane), as [`signed_distance`](Self::signed_distance)
+    /// compared with `±r` but without a square root: `(within, beyond)`,
+    /// `within` when the signed distance of `c` is at most `−r` (the sphere
+    /// lies in the cone), `beyond` when it is above `r` (at least `r` with
+    /// `or_equal`: the sphere lies outside). Both sides of each comparison
+    /// are squared where they are not negative; the results differ from
+    /// the distance's only by rounding. For half-angles in (0°, 90°).
+    #[inline]
+    pub fn sphere_side(&self, c: DVec3, r: f64, or_equal: bool) -> (bool, bool) {
+        let v = c - self.apex;
+        let par = v.dot(self.axis);
+        let w = v - self.axis * par;
+        let perp2 = w.dot(w);
+        // Within: the distance is at most −r ≤ 0 only where it is
+        // perp·cos − par·sin (a positive one is positive), so perp·cos ≤ q.
+        let q = par * self.sin - r;
+        if q >= 0.0 && perp2 * self.cos2 <= q * q {
+            return (true, false);
+        }
+        let above = |a: f64, b: f64| if or_equal { a >= b } else { a > b };
+        // Behind the apex (par·cos + perp·sin < 0, so par < 0) the distance
+        // is |c − apex|.
+        if par < 0.0 && perp2 * self.sin2 < par * par * self.cos2 {
+            return (false, above(par * par + perp2, r * r));
+        }
+        // Elsewhere it is perp·cos − par·sin, above r where perp·cos is
+        // above q' = r + par·sin (always when q' < 0).
+        let q = r + par * self.sin;
+        (false, q < 0.0 || above(perp2 * self.cos2, q * q))
     }
 
     /// True when the sphere `(c, r)` may meet the cone: it meets the cone
@@ -529,6 +567,39 @@ pub fn projected_area_px(r: f64, d: f64, focal_px: f64, screen_px: f64) -> f64 {
 mod tests {
     use super::*;
     use crate::math::rng::Rng;
+
+    #[test]
+    fn sphere_side_agrees_with_the_signed_distance() {
+        let mut rng = Rng::new(7);
+        let mut u = || rng.range(-1.0, 1.0);
+        let (mut within, mut beyond) = (0, 0);
+        for i in 0..20_000 {
+            let axis = DVec3::new(u(), u(), u()).normalize();
+            let apex = DVec3::new(u(), u(), u()) * 10.0;
+            let half = 0.05 + 1.45 * (0.5 + 0.5 * u());
+            let cone = Cone::new(apex, axis, half);
+            let c = apex + DVec3::new(u(), u(), u()) * 20.0;
+            let r = if i % 10 == 0 {
+                0.0
+            } else {
+                5.0 * (0.5 + 0.5 * u())
+            };
+            let d = cone.signed_distance(c);
+            // Away from ties, where rounding may decide either way.
+            if (d.abs() - r).abs() < 1e-9 * (1.0 + d.abs()) {
+                continue;
+            }
+            for or_equal in [false, true] {
+                let (w, b) = cone.sphere_side(c, r, or_equal);
+                assert_eq!(w, d <= -r, "within: d {d}, r {r}");
+                assert_eq!(b, d > r, "beyond: d {d}, r {r}");
+                within += usize::from(w);
+                beyond += usize::from(b);
+            }
+        }
+        // Both answers occur often enough to mean something.
+        assert!(within > 2_000 && beyond > 2_000, "{within} {beyond}");
+    }
 
     #[test]
     fn face_coords_round_trip_and_edge_rule() {

@@ -49,23 +49,48 @@ fn build_kd(grid: &Grid) -> Vec<KdNode> {
     kd
 }
 
-/// Sorted list of every quadtree ancestor (including itself) of the given
-/// leaves, for "does this VDI contain a parent problem" queries.
-fn ancestors(leaves: &[Vdi]) -> Vec<Vdi> {
-    let mut out = Vec::with_capacity(leaves.len() * 4);
-    for l in leaves {
-        for up in 0..=l.level {
-            out.push(Vdi {
-                face: l.face,
-                level: l.level - up,
-                iu: l.iu >> up,
-                iv: l.iv >> up,
-            });
-        }
+/// A set of VDIs of quadtree levels up to `leaf`, one bit each (level by
+/// level, face by face, row by row): a region's open directions, the
+/// problem views of its parent region and all their ancestors.
+struct VdiSet {
+    bits: Vec<u64>,
+}
+
+impl VdiSet {
+    /// The bit of `v`.
+    fn index(v: &Vdi) -> usize {
+        let per_face = 1usize << (2 * u32::from(v.level));
+        6 * (per_face - 1) / 3
+            + usize::from(v.face) * per_face
+            + ((v.iv as usize) << v.level)
+            + v.iu as usize
     }
-    out.sort_unstable();
-    out.dedup();
-    out
+
+    /// The VDIs of `leaves` (of level at most `leaf`) and every quadtree
+    /// ancestor of them.
+    fn with_ancestors(leaves: &[Vdi], leaf: u8) -> VdiSet {
+        let all = 6 * ((1usize << (2 * u32::from(leaf) + 2)) - 1) / 3;
+        let mut bits = vec![0u64; all.div_ceil(64)];
+        for l in leaves {
+            for up in 0..=l.level {
+                let i = Self::index(&Vdi {
+                    face: l.face,
+                    level: l.level - up,
+                    iu: l.iu >> up,
+                    iv: l.iv >> up,
+                });
+                bits[i / 64] |= 1 << (i % 64);
+            }
+        }
+        VdiSet { bits }
+    }
+
+    fn contains(&self, v: &Vdi) -> bool {
+        let i = Self::index(v);
+        self.bits
+            .get(i / 64)
+            .is_some_and(|w| w >> (i % 64) & 1 == 1)
+    }
 }
 
 struct RegionResult {
@@ -364,12 +389,12 @@ fn process(
     }
     let region = node.aabb;
     let costs = RegionCosts::of_kd(ctx, node, counters);
-    let open = ancestors(parent_problems);
+    let open = VdiSet::with_ancestors(parent_problems, levels.leaf);
     let mut problems: Vec<Vdi> = Vec::new();
     let mut cones = 0u64;
     let mut stack: Vec<Vdi> = (0..6u8).rev().map(Vdi::face).collect();
     while let Some(vdi) = stack.pop() {
-        if open.binary_search(&vdi).is_err() || !ctx.pitch_overlaps(&vdi) {
+        if !open.contains(&vdi) || !ctx.pitch_overlaps(&vdi) {
             continue;
         }
         cones += 1;
@@ -509,5 +534,65 @@ pub fn approximate(ctx: &Context, job: &Job, counters: &Counters) -> ProblemView
         cone_evaluations: res.cones,
         regions_visited: res.regions,
         refined_away: res.refined,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Every VDI down to the leaf level has a bit of its own, and a set
+    /// holds exactly its leaves and their ancestors.
+    #[test]
+    fn vdi_set_holds_leaves_and_ancestors_only() {
+        let leaf = 3u8;
+        let mut all = Vec::new();
+        for level in 0..=leaf {
+            for face in 0..6u8 {
+                for iv in 0..1u32 << level {
+                    for iu in 0..1u32 << level {
+                        all.push(Vdi {
+                            face,
+                            level,
+                            iu,
+                            iv,
+                        });
+                    }
+                }
+            }
+        }
+        let mut idx: Vec<usize> = all.iter().map(VdiSet::index).collect();
+        idx.sort_unstable();
+        idx.dedup();
+        assert_eq!(idx.len(), all.len());
+        assert_eq!(*idx.last().unwrap(), all.len() - 1);
+        let leaves = [
+            Vdi {
+                face: 4,
+                level: 3,
+                iu: 5,
+                iv: 2,
+            },
+            Vdi {
+                face: 1,
+                level: 2,
+                iu: 0,
+                iv: 3,
+            },
+        ];
+        let set = VdiSet::with_ancestors(&leaves, leaf);
+        let expected = |v: &Vdi| {
+            leaves.iter().any(|l| {
+                l.face == v.face
+                    && l.level >= v.level
+                    && l.iu >> (l.level - v.level) == v.iu
+                    && l.iv >> (l.level - v.level) == v.iv
+            })
+        };
+        let held = all.iter().filter(|v| set.contains(v)).count();
+        assert_eq!(held, 4 + 3);
+        for v in &all {
+            assert_eq!(set.contains(v), expected(v), "{v:?}");
+        }
     }
 }
