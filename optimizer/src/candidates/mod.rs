@@ -153,11 +153,47 @@ pub fn estimate_served(ctx: &Context, job: &Job, pv: &ProblemViews) -> u64 {
     (groups as f64 * blocks as f64 / sampled as f64).ceil() as u64
 }
 
-/// A candidate key, sortable and deduplicated per node.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord)]
+/// A candidate key, deduplicated per node: a shaft's angle, grid axis
+/// (its index in the angle's [`AxisGrid`]) and distance step, or a box's
+/// kd node.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
 enum Key {
-    Shaft { angle: u8, m: i32, j: u32, k: u32 },
+    Shaft { angle: u8, axis: u32, k: u32 },
     Box { kd: u32 },
+}
+
+/// A (key, served group) of one cluster packed so that integer order is
+/// block order: shafts by angle, axis, distance step descending (the shaft
+/// with the smallest distance step serves a prefix of its block), then
+/// group; boxes after them by kd node, then group. Every field keeps its
+/// full width (105 bits).
+fn pack(key: Key, g: u32) -> u128 {
+    match key {
+        Key::Shaft { angle, axis, k } => {
+            u128::from(angle) << 96
+                | u128::from(axis) << 64
+                | u128::from(u32::MAX - k) << 32
+                | u128::from(g)
+        }
+        Key::Box { kd } => 1 << 104 | u128::from(kd) << 64 | u128::from(g),
+    }
+}
+
+/// The inverse of [`pack`].
+fn unpack(p: u128) -> (Key, u32) {
+    let g = p as u32;
+    let key = if p >> 104 == 0 {
+        Key::Shaft {
+            angle: (p >> 96) as u8,
+            axis: (p >> 64) as u32,
+            k: u32::MAX - (p >> 32) as u32,
+        }
+    } else {
+        Key::Box {
+            kd: (p >> 64) as u32,
+        }
+    };
+    (key, g)
 }
 
 /// Generates the candidates for the CPVs of `pv`.
@@ -198,8 +234,9 @@ pub fn generate(ctx: &Context, job: &Job, pv: &ProblemViews) -> Candidates {
             let mut seen = vec![u32::MAX; corner_dirs.len()];
             let mut block_no = 0u32;
             let size = 2.0 * sphere.radius;
-            // (key, group) for every cell inside the key's view cell.
-            let mut tuples: Vec<(Key, u32)> = Vec::new();
+            // (key, group) for every cell inside the key's view cell,
+            // packed ([`pack`]).
+            let mut packed: Vec<u128> = Vec::new();
             let mut grid_specs: Vec<Option<Option<ImpostorSpec>>> =
                 vec![None; alphas.len() * (last_k as usize + 1)];
             for g in g0..g1 {
@@ -233,16 +270,14 @@ pub fn generate(ctx: &Context, job: &Job, pv: &ProblemViews) -> Candidates {
                         if !helps(&spec) {
                             continue;
                         }
-                        grids[ai].holding(w, alpha, corners, |m, j| {
-                            tuples.push((
-                                Key::Shaft {
-                                    angle: ai as u8,
-                                    m,
-                                    j,
-                                    k,
-                                },
-                                g,
-                            ));
+                        let grid = &grids[ai];
+                        grid.holding(w, alpha, corners, |m, j| {
+                            let key = Key::Shaft {
+                                angle: ai as u8,
+                                axis: grid.index(m, j),
+                                k,
+                            };
+                            packed.push(pack(key, g));
                         });
                     }
                 }
@@ -258,7 +293,7 @@ pub fn generate(ctx: &Context, job: &Job, pv: &ProblemViews) -> Candidates {
                     if let Some(spec) = imodel.boxed(&sphere, &pv.kd[kd as usize].aabb)
                         && helps(&spec)
                     {
-                        tuples.push((Key::Box { kd }, g));
+                        packed.push(pack(Key::Box { kd }, g));
                     }
                 } else if boxes {
                     let mut kd = first.kd;
@@ -268,38 +303,15 @@ pub fn generate(ctx: &Context, job: &Job, pv: &ProblemViews) -> Candidates {
                             break;
                         };
                         if helps(&spec) {
-                            tuples.push((Key::Box { kd }, g));
+                            packed.push(pack(Key::Box { kd }, g));
                         }
                         kd = node.parent;
                     }
                 }
             }
-            // Shafts of one (angle, axis) sorted by k descending: the shaft with
-            // minimum distance d_k serves every cell whose own k is ≥ k, a
-            // prefix of the block. Boxes serve exactly their block.
-            tuples.sort_unstable_by(|(ka, ga), (kb, gb)| match (ka, kb) {
-                (
-                    Key::Shaft {
-                        angle: a1,
-                        m: m1,
-                        j: j1,
-                        k: k1,
-                    },
-                    Key::Shaft {
-                        angle: a2,
-                        m: m2,
-                        j: j2,
-                        k: k2,
-                    },
-                ) => (a1, m1, j1, std::cmp::Reverse(k1), ga).cmp(&(
-                    a2,
-                    m2,
-                    j2,
-                    std::cmp::Reverse(k2),
-                    gb,
-                )),
-                _ => (ka, ga).cmp(&(kb, gb)),
-            });
+            // In block order (see [`pack`]).
+            packed.sort_unstable();
+            let tuples: Vec<(Key, u32)> = packed.into_iter().map(unpack).collect();
             let mut cands: Vec<Candidate> = Vec::new();
             let mut served: Vec<u32> = Vec::with_capacity(tuples.len());
             let mut i = 0;
@@ -309,17 +321,15 @@ pub fn generate(ctx: &Context, job: &Job, pv: &ProblemViews) -> Candidates {
                     (
                         Key::Shaft {
                             angle: a1,
-                            m: m1,
-                            j: j1,
+                            axis: x1,
                             ..
                         },
                         Key::Shaft {
                             angle: a2,
-                            m: m2,
-                            j: j2,
+                            axis: x2,
                             ..
                         },
-                    ) => (a1, m1, j1) == (a2, m2, j2),
+                    ) => (a1, x1) == (a2, x2),
                     _ => a == b,
                 };
                 let mut e = i;
@@ -374,9 +384,9 @@ pub fn generate(ctx: &Context, job: &Job, pv: &ProblemViews) -> Candidates {
                 for (c, &t) in ends.iter().enumerate() {
                     let served_end = start + (t - i) as u32;
                     let cand = match tuples[s].0 {
-                        Key::Shaft { angle, m, j, k } => {
+                        Key::Shaft { angle, axis, k } => {
                             let alpha = alphas[angle as usize];
-                            let grid_axis = grids[angle as usize].axis(m, j);
+                            let grid_axis = grids[angle as usize].axis_at(axis);
                             // The shaft starts where its nearest served
                             // cell does (never before `d_k`): the same
                             // cells are served, at the resolution and layer
@@ -534,6 +544,33 @@ mod tests {
     use super::*;
     use crate::math::geom::Sphere;
     use crate::testutil::synthetic_job;
+
+    /// Packed keys sort in block order: shafts by (angle, axis), distance
+    /// step descending, then group; boxes after every shaft, by kd node
+    /// then group; and unpack gives back what was packed, fields at their
+    /// extremes included.
+    #[test]
+    fn packed_keys_sort_in_block_order_and_round_trip() {
+        let shaft = |angle, axis, k| Key::Shaft { angle, axis, k };
+        let order = [
+            (shaft(0, 0, u32::MAX), 0),
+            (shaft(0, 0, 5), 0),
+            (shaft(0, 0, 5), 7),
+            (shaft(0, 0, 0), u32::MAX),
+            (shaft(0, 1, 9), 0),
+            (shaft(0, u32::MAX, 3), 2),
+            (shaft(1, 0, 3), 1),
+            (shaft(u8::MAX, 0, 0), 0),
+            (Key::Box { kd: 0 }, 5),
+            (Key::Box { kd: 3 }, 0),
+            (Key::Box { kd: u32::MAX }, u32::MAX),
+        ];
+        let packed: Vec<u128> = order.iter().map(|&(k, g)| pack(k, g)).collect();
+        assert!(packed.windows(2).all(|w| w[0] < w[1]));
+        for (&p, &t) in packed.iter().zip(&order) {
+            assert_eq!(unpack(p), t);
+        }
+    }
 
     /// The outlook names what stops an impostor: a cell the cluster
     /// reaches into, an error budget no texture can meet, or nothing.

@@ -91,7 +91,18 @@ impl AxisGrid {
 
     /// Unit axis for ring `m` and azimuth index `j`.
     pub fn axis(&self, m: i32, j: u32) -> DVec3 {
-        self.axes[(self.ring_start[self.ring_index(m)] + j) as usize]
+        self.axis_at(self.index(m, j))
+    }
+
+    /// Index of the axis of ring `m` and azimuth index `j` among all the
+    /// grid's axes, ring by ring (so ordered by `(m, j)`).
+    pub fn index(&self, m: i32, j: u32) -> u32 {
+        self.ring_start[self.ring_index(m)] + j
+    }
+
+    /// The unit axis of index `i` ([`index`](Self::index)).
+    pub fn axis_at(&self, i: u32) -> DVec3 {
+        self.axes[i as usize]
     }
 
     /// Calls `f(m, j)` for every grid axis whose cone of half-angle

@@ -202,7 +202,7 @@ pub(crate) fn select_lazy_with(
                     heap.pop();
                 }
                 Some(e) if !(e.exact && current(e) && st.fits(e.key.id)) => {
-                    stale.push((block_of(e) as u32, current(e) || e.exact));
+                    stale.push((block_of(e) as u32, e.exact || current(e)));
                     heap.pop();
                 }
                 _ => break,
