@@ -59,6 +59,7 @@ pub fn run(a: PlaceArgs) -> Result<ExitCode> {
         &PlaceOptions {
             prune: a.prune,
             max_memory_bytes: a.max_memory_gb,
+            max_memory_name: Some("--max-memory-gb"),
         },
         &Control::observed(&observer),
     )?;

@@ -22,7 +22,8 @@ pub enum JobState {
     Running,
     /// Its results are stored.
     Succeeded,
-    /// The optimizer rejected its input or failed; `error` says why.
+    /// The optimizer rejected its input or failed, or the job ran over a
+    /// per-job limit of the server; `error` says why.
     Failed,
     /// Cancelled by a `DELETE` before it finished.
     Cancelled,

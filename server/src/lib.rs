@@ -52,6 +52,13 @@ pub struct Config {
     pub max_queue: usize,
     /// Views of the evaluation run after each placement.
     pub eval_views: u64,
+    /// The longest a job may run, seconds (`--job-max-seconds`): it is
+    /// stopped at its next check after that and ends `failed`.
+    pub job_max_seconds: Option<u64>,
+    /// The most memory a job's placement may be predicted to need, bytes
+    /// (`--job-max-memory`; default: the machine's): a job predicted to need
+    /// more ends `failed` before the memory is allocated.
+    pub job_max_memory_bytes: Option<u64>,
 }
 
 impl Config {
@@ -63,6 +70,8 @@ impl Config {
             max_upload_mb: 256,
             max_queue: 64,
             eval_views: 10_000,
+            job_max_seconds: None,
+            job_max_memory_bytes: None,
         }
     }
 }

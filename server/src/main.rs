@@ -25,6 +25,23 @@ struct Cli {
     /// Most jobs waiting in the queue.
     #[arg(long, default_value_t = 64)]
     max_queue: usize,
+    /// The longest a job may run, seconds: it is stopped and ends `failed`
+    /// (default: no limit).
+    #[arg(long, value_name = "SECONDS", value_parser = clap::value_parser!(u64).range(1..))]
+    job_max_seconds: Option<u64>,
+    /// The most memory a job's placement may be predicted to need, GB: a
+    /// job predicted to need more ends `failed` before allocating it
+    /// (default: the machine's memory).
+    #[arg(long, value_name = "GB", value_parser = parse_gb)]
+    job_max_memory: Option<u64>,
+}
+
+/// A positive number of GB, as bytes.
+fn parse_gb(s: &str) -> Result<u64, String> {
+    match s.parse::<f64>() {
+        Ok(g) if g.is_finite() && g > 0.0 && g <= 1e9 => Ok((g * 1e9) as u64),
+        _ => Err(format!("expected a positive number of GB, got {s:?}")),
+    }
 }
 
 #[tokio::main]
@@ -41,6 +58,8 @@ async fn main() -> std::io::Result<()> {
     cfg.workers = cli.workers.max(1);
     cfg.max_upload_mb = cli.max_upload_mb.max(1);
     cfg.max_queue = cli.max_queue.max(1);
+    cfg.job_max_seconds = cli.job_max_seconds;
+    cfg.job_max_memory_bytes = cli.job_max_memory;
     let state = AppState::open(cfg)?;
     let listener = tokio::net::TcpListener::bind(&cli.listen).await?;
     tracing::info!("listening on {}", listener.local_addr()?);

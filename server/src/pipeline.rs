@@ -12,6 +12,7 @@ use optimizer::api::job::{Job, VisibilityMode};
 use optimizer::control::{Control, Event};
 use optimizer::evaluate::EvalOptions;
 use optimizer::input::{GeometryUse, Load, SceneInput, Source};
+use optimizer::place::PlaceOptions;
 use optimizer::report::render::render_html;
 use optimizer::report::run::{place_and_evaluate, single_run_report};
 
@@ -79,6 +80,8 @@ pub(crate) struct RunOptions<'a> {
     pub eval_views: u64,
     /// Set to stop the run at its next check.
     pub cancel: &'a AtomicBool,
+    /// The server's per-job memory limit (`--job-max-memory`), bytes.
+    pub max_memory_bytes: Option<u64>,
     /// Called with the stage name and the fraction of the run done.
     pub progress: &'a (dyn Fn(&str, f64) + Sync),
 }
@@ -139,7 +142,12 @@ pub(crate) fn run_job(dir: &Path, opts: &RunOptions<'_>) -> optimizer::Result<St
         seed: 1,
         ..EvalOptions::default()
     };
-    let out = place_and_evaluate(&prepared, &eval, true, &ctl)?;
+    let place = PlaceOptions {
+        max_memory_bytes: opts.max_memory_bytes,
+        max_memory_name: Some("the server's --job-max-memory"),
+        ..PlaceOptions::default()
+    };
+    let out = place_and_evaluate(&prepared, &place, &eval, true, &ctl)?;
     ctl.check()?;
     write_atomic(
         &dir.join("placement.json"),

@@ -3,8 +3,9 @@
 //! progress and watching its cancel flag.
 
 use std::collections::HashMap;
-use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU8, AtomicUsize, Ordering};
 use std::sync::{Arc, Mutex, mpsc};
+use std::time::Duration;
 
 use crate::AppState;
 use crate::job::{CANCELLED_BY_REQUEST, JobState};
@@ -50,7 +51,46 @@ impl Queue {
 struct Live {
     stage: String,
     progress: f64,
-    cancel: Arc<AtomicBool>,
+    stop: Arc<Stop>,
+}
+
+/// Why a running job was asked to stop.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum Stopped {
+    /// It was not.
+    No = 0,
+    /// A `DELETE` cancelled it.
+    ByRequest = 1,
+    /// It ran past the server's `--job-max-seconds`.
+    TimeLimit = 2,
+}
+
+/// Asks a running job to stop: the flag the optimizer checks, and the
+/// reason first given (a cancel and a time limit may race: the first wins).
+#[derive(Default)]
+pub(crate) struct Stop {
+    cancel: AtomicBool,
+    reason: AtomicU8,
+}
+
+impl Stop {
+    fn ask(&self, why: Stopped) {
+        let _ = self.reason.compare_exchange(
+            Stopped::No as u8,
+            why as u8,
+            Ordering::SeqCst,
+            Ordering::SeqCst,
+        );
+        self.cancel.store(true, Ordering::SeqCst);
+    }
+
+    fn reason(&self) -> Stopped {
+        match self.reason.load(Ordering::SeqCst) {
+            1 => Stopped::ByRequest,
+            2 => Stopped::TimeLimit,
+            _ => Stopped::No,
+        }
+    }
 }
 
 /// The running jobs' live stage, progress and cancel flag. A job is here
@@ -70,23 +110,23 @@ impl LiveJobs {
         if let Ok(live) = self.0.lock()
             && let Some(l) = live.get(&id)
         {
-            l.cancel.store(true, Ordering::Relaxed);
+            l.stop.ask(Stopped::ByRequest);
         }
     }
 
-    fn start(&self, id: i64) -> Arc<AtomicBool> {
-        let cancel = Arc::new(AtomicBool::new(false));
+    fn start(&self, id: i64) -> Arc<Stop> {
+        let stop = Arc::new(Stop::default());
         if let Ok(mut live) = self.0.lock() {
             live.insert(
                 id,
                 Live {
                     stage: "loading".into(),
                     progress: 0.0,
-                    cancel: cancel.clone(),
+                    stop: stop.clone(),
                 },
             );
         }
-        cancel
+        stop
     }
 
     fn update(&self, id: i64, stage: &str, progress: f64) {
@@ -146,21 +186,44 @@ fn run(st: &AppState, id: i64) {
         _ => return,
     };
     let live = &st.0.live;
-    let cancel = live.start(id);
+    let stop = live.start(id);
     store.set_state(id, JobState::Running, None, None);
     tracing::info!(job = id, "running");
     let progress = |stage: &str, f: f64| live.update(id, stage, f);
     let opts = RunOptions {
         bake,
         eval_views: st.0.cfg.eval_views,
-        cancel: &cancel,
+        cancel: &stop.cancel,
+        max_memory_bytes: st.0.cfg.job_max_memory_bytes,
         progress: &progress,
     };
     let dir = store.job_dir(id);
+    // The time limit: a watchdog asks the job to stop unless it ends first.
+    let (ended, watch) = mpsc::channel::<()>();
+    let limit = st.0.cfg.job_max_seconds;
+    let watchdog = limit.and_then(|secs| {
+        let stop = stop.clone();
+        std::thread::Builder::new()
+            .name(format!("job-{id}-limit"))
+            .spawn(move || {
+                if watch.recv_timeout(Duration::from_secs(secs))
+                    == Err(mpsc::RecvTimeoutError::Timeout)
+                {
+                    stop.ask(Stopped::TimeLimit);
+                }
+            })
+            .inspect_err(|e| tracing::warn!(job = id, "no time limit: {e}"))
+            .ok()
+    });
     // A panic in the optimizer fails this job, not the worker.
     let outcome = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| run_job(&dir, &opts)));
+    let stopped = stop.reason();
+    drop(ended);
+    if let Some(w) = watchdog {
+        let _ = w.join();
+    }
     live.finish(id);
-    let (state, error, summary) = final_state(outcome, cancel.load(Ordering::SeqCst));
+    let (state, error, summary) = final_state(outcome, stopped, limit.unwrap_or(0));
     match state {
         JobState::Succeeded => tracing::info!(job = id, "succeeded"),
         JobState::Cancelled => tracing::info!(job = id, "cancelled"),
@@ -184,26 +247,34 @@ fn release_memory() {
     }
 }
 
-/// The state a run ends in, its error and its summary: a job whose cancel
-/// flag was set while it ran ends `cancelled` whatever its last stage did
-/// (its results, if written, are removed with it by a later `DELETE`); a
-/// panic is an internal error, not its text.
+/// The state a run ends in, its error and its summary: a job cancelled by
+/// a request while it ran ends `cancelled` whatever its last stage did (its
+/// results, if written, are removed with it by a later `DELETE`); one
+/// stopped at the server's time limit (`limit_s` seconds) ends `failed`,
+/// naming the limit; a panic is an internal error, not its text.
 fn final_state(
     outcome: std::thread::Result<optimizer::Result<String>>,
-    cancelled: bool,
+    stopped: Stopped,
+    limit_s: u64,
 ) -> (JobState, Option<String>, Option<String>) {
-    match outcome {
-        _ if cancelled => (
+    let cancelled = || {
+        (
             JobState::Cancelled,
             Some(CANCELLED_BY_REQUEST.to_string()),
+            None,
+        )
+    };
+    match outcome {
+        _ if stopped == Stopped::ByRequest => cancelled(),
+        _ if stopped == Stopped::TimeLimit => (
+            JobState::Failed,
+            Some(format!(
+                "stopped after {limit_s} s, the server's --job-max-seconds limit"
+            )),
             None,
         ),
         Ok(Ok(summary)) => (JobState::Succeeded, None, Some(summary)),
-        Ok(Err(optimizer::Error::Cancelled)) => (
-            JobState::Cancelled,
-            Some(CANCELLED_BY_REQUEST.to_string()),
-            None,
-        ),
+        Ok(Err(optimizer::Error::Cancelled)) => cancelled(),
         Ok(Err(e)) => (JobState::Failed, Some(e.to_string()), None),
         Err(_) => (
             JobState::Failed,
@@ -248,16 +319,44 @@ mod tests {
     #[test]
     fn cancellation_wins_over_the_last_stage() {
         let ok = || Ok(Ok("{}".to_string()));
-        assert_eq!(final_state(ok(), false).0, JobState::Succeeded);
-        let (state, error, summary) = final_state(ok(), true);
+        assert_eq!(final_state(ok(), Stopped::No, 0).0, JobState::Succeeded);
+        let (state, error, summary) = final_state(ok(), Stopped::ByRequest, 0);
         assert_eq!(state, JobState::Cancelled);
         assert_eq!(error.as_deref(), Some(CANCELLED_BY_REQUEST));
         assert!(summary.is_none());
         let failed = || Ok(Err(optimizer::Error::bad("job", "nope")));
-        assert_eq!(final_state(failed(), false).0, JobState::Failed);
-        assert_eq!(final_state(failed(), true).0, JobState::Cancelled);
-        let panicked = final_state(Err(Box::new("boom")), false);
+        assert_eq!(final_state(failed(), Stopped::No, 0).0, JobState::Failed);
+        assert_eq!(
+            final_state(failed(), Stopped::ByRequest, 0).0,
+            JobState::Cancelled
+        );
+        let panicked = final_state(Err(Box::new("boom")), Stopped::No, 0);
         assert_eq!(panicked.0, JobState::Failed);
         assert_eq!(panicked.1.as_deref(), Some("internal error (a bug)"));
+    }
+
+    /// A job stopped at the time limit fails naming the limit, whether its
+    /// run noticed the stop or finished its last stage first; the first
+    /// reason to stop wins.
+    #[test]
+    fn a_job_past_the_time_limit_fails_naming_it() {
+        for outcome in [
+            Ok(Err(optimizer::Error::Cancelled)),
+            Ok(Ok("{}".to_string())),
+        ] {
+            let (state, error, summary) = final_state(outcome, Stopped::TimeLimit, 30);
+            assert_eq!(state, JobState::Failed);
+            assert_eq!(
+                error.as_deref(),
+                Some("stopped after 30 s, the server's --job-max-seconds limit")
+            );
+            assert!(summary.is_none());
+        }
+        let stop = Stop::default();
+        assert_eq!(stop.reason(), Stopped::No);
+        stop.ask(Stopped::TimeLimit);
+        stop.ask(Stopped::ByRequest);
+        assert_eq!(stop.reason(), Stopped::TimeLimit);
+        assert!(stop.cancel.load(Ordering::SeqCst));
     }
 }

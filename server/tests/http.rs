@@ -324,6 +324,71 @@ async fn full_queue_and_cancellation() {
     assert_eq!(s, 409);
 }
 
+/// The server's per-job limits: a job running past `--job-max-seconds`
+/// is stopped and fails naming the limit; one predicted to need more than
+/// `--job-max-memory` fails naming that limit, before allocating it.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn jobs_over_the_per_job_limits_fail_naming_them() {
+    let summary = |scale| {
+        serde_json::to_value(
+            optimizer::scene::gltf_load::load_scene_bytes(&city(scale), "c")
+                .unwrap()
+                .summary(),
+        )
+        .unwrap()
+    };
+    let submit = |addr, body: Value| async move {
+        let (s, b) = submit_json(addr, &body).await;
+        assert_eq!(s, 202, "{}", String::from_utf8_lossy(&b));
+        serde_json::from_slice::<Value>(&b).unwrap()["id"]
+            .as_i64()
+            .unwrap()
+    };
+
+    // The full city's reference job places for several seconds.
+    let mut cfg = Config::new(temp_dir("time-limit"));
+    cfg.job_max_seconds = Some(1);
+    let addr = start(cfg).await;
+    let job: Value = serde_json::from_slice(
+        &std::fs::read(concat!(
+            env!("CARGO_MANIFEST_DIR"),
+            "/../fixtures/jobs/vienna-reference.json"
+        ))
+        .unwrap(),
+    )
+    .unwrap();
+    let begin = Instant::now();
+    let id = submit(addr, json!({"scene": summary(1.0), "job": job})).await;
+    let v = wait_final(addr, id, Duration::from_secs(60)).await;
+    assert_eq!(v["state"], "failed", "{v}");
+    assert_eq!(
+        v["error"], "stopped after 1 s, the server's --job-max-seconds limit",
+        "{v}"
+    );
+    assert!(
+        begin.elapsed() < Duration::from_secs(5),
+        "stopped after {:?}",
+        begin.elapsed()
+    );
+    let (s, _) = get_json(addr, &format!("/v1/jobs/{id}/placement")).await;
+    assert_eq!(s, 409);
+
+    // The small city's job needs far more than 1 kB (without the limit it
+    // succeeds: the first test above).
+    let mut cfg = Config::new(temp_dir("memory-limit"));
+    cfg.job_max_memory_bytes = Some(1000);
+    let addr = start(cfg).await;
+    let job: Value = serde_json::from_slice(&job_json()).unwrap();
+    let id = submit(addr, json!({"scene": summary(0.1), "job": job})).await;
+    let v = wait_final(addr, id, Duration::from_secs(60)).await;
+    assert_eq!(v["state"], "failed", "{v}");
+    let error = v["error"].as_str().unwrap();
+    assert!(
+        error.contains("more than the 0.0 GB the server's --job-max-memory allows"),
+        "{error}"
+    );
+}
+
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn visibility_jobs_run_and_missing_inputs_are_refused() {
     let mut cfg = Config::new(temp_dir("vis"));

@@ -78,11 +78,8 @@ pub const LAZY_BATCH: usize = 32;
 /// when no cell the candidate serves changed since; a current exact key at
 /// the top, the largest of upper bounds, is the greedy choice. Keys at the
 /// top that are not are recomputed, a batch of [`LAZY_BATCH`] blocks at a
-/// time in parallel: a current bound becomes the block's exact scores, and
-/// so does an exact key made out of date by a choice (a bound of it seldom
-/// drops it below the top, so it would be scored anyway: on the fly-over's
-/// 500 m part this trades 1.0 M bounds for 0.3 M scores); any other key
-/// becomes a current bound. Scores can rise (memory regained by
+/// time in parallel: a current bound becomes the block's exact scores, any
+/// other key a current bound. Scores can rise (memory regained by
 /// hierarchy replacement, rounding), so which keys get refreshed may change
 /// the choice: the batch is a constant, never derived from the thread
 /// count, so the result is the same for any number of threads.
@@ -191,10 +188,10 @@ pub(crate) fn select_lazy_with(
             continue;
         }
         // The blocks at the top whose keys are not exact now, up to a
-        // batch, computed again in parallel: a current key or an exact one
-        // becomes exact scores (a current exact one whose candidate no
-        // longer fits in the budget: its block's others), an older bound a
-        // current bound. An exact current key that fits ends the batch.
+        // batch, computed again in parallel: a current key becomes exact
+        // scores (a current exact one whose candidate no longer fits in the
+        // budget: its block's others), anything older a current bound. An
+        // exact current key that fits ends the batch.
         stale.clear();
         while stale.len() < batch {
             match heap.peek() {
@@ -202,7 +199,7 @@ pub(crate) fn select_lazy_with(
                     heap.pop();
                 }
                 Some(e) if !(e.exact && current(e) && st.fits(e.key.id)) => {
-                    stale.push((block_of(e) as u32, e.exact || current(e)));
+                    stale.push((block_of(e) as u32, current(e)));
                     heap.pop();
                 }
                 _ => break,

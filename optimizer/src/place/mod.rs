@@ -25,6 +25,9 @@ pub struct PlaceOptions {
     /// The most memory a run may need, bytes, as predicted once the problem
     /// views are known; `None`: the machine's memory ([`machine_memory_bytes`]).
     pub max_memory_bytes: Option<u64>,
+    /// Who set `max_memory_bytes`, named when a job is refused for it (a
+    /// command-line flag, a server's per-job limit).
+    pub max_memory_name: Option<&'static str>,
 }
 
 /// The result of [`Prepared::place`].
@@ -95,14 +98,18 @@ impl Prepared<'_> {
                 self.job_name(),
                 format!(
                     "the job needs about {:.1} GB ({} problem views listing {} (problem view, cluster) pairs \
-                     over a scene of {} objects), more than the {:.1} GB available; raise \
+                     over a scene of {} objects), more than the {:.1} GB {}; raise \
                      target_frame_time_ms, enlarge problem_views.cell_size or min_vdi_deg, shrink the \
                      view space, or split the scene",
                     predicted as f64 / 1e9,
                     pv.cpvs.len(),
                     counters.pairs(),
                     ctx.scene.objects.len(),
-                    limit as f64 / 1e9
+                    limit as f64 / 1e9,
+                    match (opts.max_memory_bytes, opts.max_memory_name) {
+                        (Some(_), Some(name)) => format!("{name} allows"),
+                        _ => "available".to_string(),
+                    }
                 ),
             ));
         }
@@ -471,6 +478,14 @@ mod tests {
         let e = try_place(&scene, &job, &opts, &Control::default()).unwrap_err();
         assert!(e.is_bad_input(), "{e}");
         assert!(e.to_string().contains("target_frame_time_ms"), "{e}");
+        assert!(e.to_string().contains("GB available"), "{e}");
+        // Named by whoever set the limit.
+        let named = PlaceOptions {
+            max_memory_name: Some("the --limit flag"),
+            ..opts
+        };
+        let e = try_place(&scene, &job, &named, &Control::default()).unwrap_err();
+        assert!(e.to_string().contains("GB the --limit flag allows"), "{e}");
         // With room for the prediction the same job places.
         let opts = PlaceOptions {
             max_memory_bytes: Some(predicted * 2),

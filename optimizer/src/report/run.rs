@@ -207,17 +207,18 @@ pub struct RunOutput {
     pub frames: Option<Vec<f64>>,
 }
 
-/// Places `prepared`'s job, evaluates the placement with `eval` and, with
+/// Places `prepared`'s job with `opts`, evaluates the placement with `eval` and, with
 /// `walk`, follows the job's walkthrough.
 pub fn place_and_evaluate(
     prepared: &Prepared,
+    opts: &PlaceOptions,
     eval: &EvalOptions,
     walk: bool,
     ctl: &Control,
 ) -> Result<RunOutput> {
     let job = prepared.job();
     let start = Instant::now();
-    let out = prepared.place(&PlaceOptions::default(), ctl)?;
+    let out = prepared.place(opts, ctl)?;
     let seconds = start.elapsed().as_secs_f64();
     ctl.check()?;
     let p = &out.placement;
@@ -290,7 +291,13 @@ fn one_run<'a>(
         check_rays: 0,
         check_objects: 0,
     };
-    let out = place_and_evaluate(&prepared, &eval, walk, &Control::default())?;
+    let out = place_and_evaluate(
+        &prepared,
+        &PlaceOptions::default(),
+        &eval,
+        walk,
+        &Control::default(),
+    )?;
     Ok((out.run, out.frames))
 }
 
