@@ -29,7 +29,7 @@ impl ApiError {
     }
 
     /// A 404 answer for an id without a job.
-    pub(crate) fn no_job(id: i64) -> Self {
+    pub(crate) fn no_job(id: &str) -> Self {
         ApiError::new(StatusCode::NOT_FOUND, format!("no job {id}"))
     }
 }

@@ -1,6 +1,10 @@
 //! Durable job storage: the SQLite database (`jobs.sqlite`: WAL,
 //! `synchronous = FULL`) and one directory of files per job, written
 //! atomically. Also recovers the jobs a previous process left unfinished.
+//!
+//! A job has two ids: its row's integer id, internal (queue order, folder
+//! name, logs), and its public id, a random UUID (`uid`), the only one the
+//! API takes and answers with, so that nobody can guess or enumerate jobs.
 
 use std::io;
 use std::path::{Path, PathBuf};
@@ -17,8 +21,15 @@ pub(crate) struct Store {
     jobs_dir: PathBuf,
 }
 
+/// A new public job id: a random (version 4) UUID.
+fn new_uid() -> String {
+    uuid::Uuid::new_v4().to_string()
+}
+
 /// One row of the `jobs` table.
 pub(crate) struct JobRow {
+    /// The public id.
+    pub uid: String,
     pub state: JobState,
     /// The last stage recorded (the live stage of a running job is kept in
     /// memory, not here).
@@ -88,6 +99,29 @@ impl Store {
              CREATE TABLE IF NOT EXISTS meta (k TEXT PRIMARY KEY, v INTEGER NOT NULL);",
         )
         .map_err(db_err)?;
+        // Public ids: a database of an older version has none; its jobs get
+        // one each (their old numeric ids are then 404 like any unknown id).
+        let has_uid = db
+            .prepare("SELECT 1 FROM pragma_table_info('jobs') WHERE name = 'uid'")
+            .and_then(|mut s| s.exists([]))
+            .map_err(db_err)?;
+        if !has_uid {
+            db.execute_batch("ALTER TABLE jobs ADD COLUMN uid TEXT")
+                .map_err(db_err)?;
+        }
+        let missing: Vec<i64> = db
+            .prepare("SELECT id FROM jobs WHERE uid IS NULL")
+            .and_then(|mut s| s.query_map([], |r| r.get(0))?.collect())
+            .map_err(db_err)?;
+        for id in missing {
+            db.execute(
+                "UPDATE jobs SET uid = ?2 WHERE id = ?1",
+                rusqlite::params![id, new_uid()],
+            )
+            .map_err(db_err)?;
+        }
+        db.execute_batch("CREATE UNIQUE INDEX IF NOT EXISTS jobs_uid ON jobs (uid)")
+            .map_err(db_err)?;
         Ok(Store {
             db: Mutex::new(db),
             jobs_dir,
@@ -138,15 +172,16 @@ impl Store {
         self.jobs_dir.join(id.to_string())
     }
 
-    /// Stores a new job: allocates its id, writes (and syncs) its inputs,
-    /// then commits its row as `queued`. Returns the id.
+    /// Stores a new job: allocates its ids, writes (and syncs) its inputs,
+    /// then commits its row as `queued`. Returns the internal and the
+    /// public id.
     pub fn create(
         &self,
         scene: &[u8],
         job: &[u8],
         pvs: Option<&[u8]>,
         bake: bool,
-    ) -> io::Result<i64> {
+    ) -> io::Result<(i64, String)> {
         let db = self.db()?;
         // Ids are never reused, not even those of deleted jobs.
         let id: i64 = db
@@ -175,12 +210,25 @@ impl Store {
         } else {
             "json"
         };
+        let uid = new_uid();
         db.execute(
-            "INSERT INTO jobs (id, state, bake, scene_kind, created_ms) VALUES (?1, ?2, ?3, ?4, ?5)",
-            rusqlite::params![id, JobState::Queued, bake as i64, kind, now_ms()],
+            "INSERT INTO jobs (id, uid, state, bake, scene_kind, created_ms)
+             VALUES (?1, ?2, ?3, ?4, ?5, ?6)",
+            rusqlite::params![id, uid, JobState::Queued, bake as i64, kind, now_ms()],
         )
         .map_err(db_err)?;
-        Ok(id)
+        Ok((id, uid))
+    }
+
+    /// The internal id of the job whose public id is `uid`; `Ok(None)` when
+    /// there is none.
+    pub fn lookup(&self, uid: &str) -> io::Result<Option<i64>> {
+        let db = self.db()?;
+        match db.query_row("SELECT id FROM jobs WHERE uid = ?1", [uid], |r| r.get(0)) {
+            Ok(id) => Ok(Some(id)),
+            Err(rusqlite::Error::QueryReturnedNoRows) => Ok(None),
+            Err(e) => Err(db_err(e)),
+        }
     }
 
     /// Records a job's new state, with its error or summary when given;
@@ -207,7 +255,7 @@ impl Store {
         let db = self.db()?;
         Ok(db
             .query_row(
-                "SELECT state, stage, error, summary, bake, created_ms, started_ms, finished_ms
+                "SELECT state, stage, error, summary, bake, created_ms, started_ms, finished_ms, uid
                  FROM jobs WHERE id = ?1",
                 [id],
                 |r| {
@@ -220,6 +268,7 @@ impl Store {
                         created_ms: r.get(5)?,
                         started_ms: r.get(6)?,
                         finished_ms: r.get(7)?,
+                        uid: r.get(8)?,
                     })
                 },
             )
@@ -245,5 +294,57 @@ impl Store {
             .map_err(db_err)?;
         let _ = std::fs::remove_dir_all(self.job_dir(id));
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn temp_dir(name: &str) -> PathBuf {
+        let d = std::env::temp_dir().join(format!("impostor-store-{name}-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&d);
+        std::fs::create_dir_all(&d).unwrap();
+        d
+    }
+
+    /// New jobs get distinct random UUIDs that lead back to them; a
+    /// database of an older version, without public ids, gets one for
+    /// each of its jobs on open, and its old numeric ids lead nowhere.
+    #[test]
+    fn jobs_have_random_public_ids_and_older_databases_get_them() {
+        let dir = temp_dir("uid");
+        {
+            let db = Connection::open(dir.join("jobs.sqlite")).unwrap();
+            db.execute_batch(
+                "CREATE TABLE jobs (
+                     id INTEGER PRIMARY KEY, state TEXT NOT NULL, stage TEXT, error TEXT,
+                     summary TEXT, bake INTEGER NOT NULL, scene_kind TEXT NOT NULL,
+                     created_ms INTEGER NOT NULL, started_ms INTEGER, finished_ms INTEGER);
+                 INSERT INTO jobs (id, state, bake, scene_kind, created_ms)
+                 VALUES (1, 'succeeded', 0, 'json', 5);",
+            )
+            .unwrap();
+        }
+        let store = Store::open(&dir).unwrap();
+        let old = store.row(1).unwrap().unwrap().uid;
+        assert_eq!(
+            uuid::Uuid::parse_str(&old).unwrap().get_version(),
+            Some(uuid::Version::Random)
+        );
+        assert_eq!(store.lookup(&old).unwrap(), Some(1));
+        assert_eq!(store.lookup("1").unwrap(), None);
+        let (a, ua) = store.create(b"{}", b"{}", None, false).unwrap();
+        let (b, ub) = store.create(b"{}", b"{}", None, false).unwrap();
+        assert_eq!((a, b), (2, 3));
+        assert!(ua != ub && ua != old);
+        assert_eq!(store.lookup(&ub).unwrap(), Some(3));
+        assert_eq!(store.row(2).unwrap().unwrap().uid, ua);
+        // Reopening keeps every id.
+        drop(store);
+        let store = Store::open(&dir).unwrap();
+        assert_eq!(store.lookup(&old).unwrap(), Some(1));
+        assert_eq!(store.lookup(&ua).unwrap(), Some(2));
+        let _ = std::fs::remove_dir_all(&dir);
     }
 }

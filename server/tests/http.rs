@@ -87,7 +87,7 @@ fn multipart(parts: &[(&str, &[u8])]) -> (String, Vec<u8>) {
     (format!("multipart/form-data; boundary={boundary}"), body)
 }
 
-async fn wait_final(addr: SocketAddr, id: i64, limit: Duration) -> Value {
+async fn wait_final(addr: SocketAddr, id: &str, limit: Duration) -> Value {
     let start = Instant::now();
     loop {
         let (s, v) = get_json(addr, &format!("/v1/jobs/{id}")).await;
@@ -145,18 +145,20 @@ async fn summary_and_glb_jobs_succeed_with_the_cli_bytes() {
     let (s, b) = submit_json(addr, &body).await;
     assert_eq!(s, 202, "{}", String::from_utf8_lossy(&b));
     let id1 = serde_json::from_slice::<Value>(&b).unwrap()["id"]
-        .as_i64()
-        .unwrap();
+        .as_str()
+        .unwrap()
+        .to_string();
 
     // GLB upload, baked.
     let (ct, body) = multipart(&[("scene", &glb), ("job", &job_json()), ("bake", b"true")]);
     let (s, b) = request(addr, "POST", "/v1/jobs", Some(&ct), &body).await;
     assert_eq!(s, 202, "{}", String::from_utf8_lossy(&b));
     let id2 = serde_json::from_slice::<Value>(&b).unwrap()["id"]
-        .as_i64()
-        .unwrap();
+        .as_str()
+        .unwrap()
+        .to_string();
 
-    for id in [id1, id2] {
+    for id in [&id1, &id2] {
         let v = wait_final(addr, id, Duration::from_secs(120)).await;
         assert_eq!(v["state"], "succeeded", "{v}");
         assert_eq!(v["progress"], 1.0);
@@ -196,7 +198,7 @@ async fn summary_and_glb_jobs_succeed_with_the_cli_bytes() {
     let (s, _) = get_json(addr, "/healthz").await;
     assert_eq!(s, 200);
 
-    // Deleting a finished job removes it; its id is not reused.
+    // Deleting a finished job removes it.
     let (s, _) = request(addr, "DELETE", &format!("/v1/jobs/{id2}"), None, b"").await;
     assert_eq!(s, 200);
     let (s, _) = get_json(addr, &format!("/v1/jobs/{id2}")).await;
@@ -208,9 +210,25 @@ async fn summary_and_glb_jobs_succeed_with_the_cli_bytes() {
     let (s, b) = submit_json(addr, &body).await;
     assert_eq!(s, 202);
     let id3 = serde_json::from_slice::<Value>(&b).unwrap()["id"]
-        .as_i64()
-        .unwrap();
-    assert!(id3 > id2, "{id3} reuses a deleted id");
+        .as_str()
+        .unwrap()
+        .to_string();
+    // Ids are random UUIDs: never reused, not sequential, not guessable;
+    // a numeric id (as older versions gave) is an unknown id.
+    for id in [&id1, &id2, &id3] {
+        let u = uuid::Uuid::parse_str(id).unwrap();
+        assert_eq!(u.get_version(), Some(uuid::Version::Random), "{id}");
+    }
+    assert!(id1 != id2 && id2 != id3 && id1 != id3);
+    let (s, v) = get_json(addr, "/v1/jobs/1").await;
+    assert_eq!(s, 404, "{v}");
+    assert_eq!(v["error"], "no job 1");
+    let (s, v) = get_json(addr, "/v1/jobs?after=1").await;
+    assert_eq!(s, 400, "{v}");
+    // Pages follow submission order, the cursor being a job's id.
+    let (s, list) = get_json(addr, &format!("/v1/jobs?after={id1}")).await;
+    assert_eq!(s, 200);
+    assert_eq!(list["jobs"][0]["id"], id3, "{list}");
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
@@ -291,8 +309,9 @@ async fn full_queue_and_cancellation() {
     let (s, b) = submit_json(addr, &body).await;
     assert_eq!(s, 202, "{}", String::from_utf8_lossy(&b));
     let id = serde_json::from_slice::<Value>(&b).unwrap()["id"]
-        .as_i64()
-        .unwrap();
+        .as_str()
+        .unwrap()
+        .to_string();
     // Wait until a worker runs it and has started placing.
     let begin = Instant::now();
     loop {
@@ -313,7 +332,7 @@ async fn full_queue_and_cancellation() {
     let asked = Instant::now();
     let (s, _) = request(addr, "DELETE", &format!("/v1/jobs/{id}"), None, b"").await;
     assert_eq!(s, 200);
-    let v = wait_final(addr, id, Duration::from_secs(30)).await;
+    let v = wait_final(addr, &id, Duration::from_secs(30)).await;
     assert_eq!(v["state"], "cancelled", "{v}");
     assert!(
         asked.elapsed() < Duration::from_secs(2),
@@ -341,8 +360,9 @@ async fn jobs_over_the_per_job_limits_fail_naming_them() {
         let (s, b) = submit_json(addr, &body).await;
         assert_eq!(s, 202, "{}", String::from_utf8_lossy(&b));
         serde_json::from_slice::<Value>(&b).unwrap()["id"]
-            .as_i64()
+            .as_str()
             .unwrap()
+            .to_string()
     };
 
     // The full city's reference job places for several seconds.
@@ -359,7 +379,7 @@ async fn jobs_over_the_per_job_limits_fail_naming_them() {
     .unwrap();
     let begin = Instant::now();
     let id = submit(addr, json!({"scene": summary(1.0), "job": job})).await;
-    let v = wait_final(addr, id, Duration::from_secs(60)).await;
+    let v = wait_final(addr, &id, Duration::from_secs(60)).await;
     assert_eq!(v["state"], "failed", "{v}");
     assert_eq!(
         v["error"], "stopped after 1 s, the server's --job-max-seconds limit",
@@ -380,7 +400,7 @@ async fn jobs_over_the_per_job_limits_fail_naming_them() {
     let addr = start(cfg).await;
     let job: Value = serde_json::from_slice(&job_json()).unwrap();
     let id = submit(addr, json!({"scene": summary(0.1), "job": job})).await;
-    let v = wait_final(addr, id, Duration::from_secs(60)).await;
+    let v = wait_final(addr, &id, Duration::from_secs(60)).await;
     assert_eq!(v["state"], "failed", "{v}");
     let error = v["error"].as_str().unwrap();
     assert!(
@@ -406,9 +426,10 @@ async fn visibility_jobs_run_and_missing_inputs_are_refused() {
     let (s, b) = request(addr, "POST", "/v1/jobs", Some(&ct), &body).await;
     assert_eq!(s, 202, "{}", String::from_utf8_lossy(&b));
     let id = serde_json::from_slice::<Value>(&b).unwrap()["id"]
-        .as_i64()
-        .unwrap();
-    let v = wait_final(addr, id, Duration::from_secs(120)).await;
+        .as_str()
+        .unwrap()
+        .to_string();
+    let v = wait_final(addr, &id, Duration::from_secs(120)).await;
     assert_eq!(v["state"], "succeeded", "{v}");
     let (s, placement) = request(addr, "GET", &format!("/v1/jobs/{id}/placement"), None, b"").await;
     assert_eq!(s, 200);
@@ -464,9 +485,10 @@ async fn visibility_jobs_run_and_missing_inputs_are_refused() {
     let (s, b) = request(addr, "POST", "/v1/jobs", Some(&ct), &body).await;
     assert_eq!(s, 202, "{}", String::from_utf8_lossy(&b));
     let id = serde_json::from_slice::<Value>(&b).unwrap()["id"]
-        .as_i64()
-        .unwrap();
-    let v = wait_final(addr, id, Duration::from_secs(120)).await;
+        .as_str()
+        .unwrap()
+        .to_string();
+    let v = wait_final(addr, &id, Duration::from_secs(120)).await;
     assert_eq!(v["state"], "succeeded", "{v}");
     assert!(v["summary"]["cpvs"].as_u64().unwrap() > 0, "{v}");
 }

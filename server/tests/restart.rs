@@ -87,8 +87,9 @@ fn kill_9_and_restart_finishes_every_job() {
         assert_eq!(s, 202, "{}", String::from_utf8_lossy(&b));
         ids.push(
             serde_json::from_slice::<Value>(&b).unwrap()["id"]
-                .as_i64()
-                .unwrap(),
+                .as_str()
+                .unwrap()
+                .to_string(),
         );
     }
     // Kill while the first job is being placed (the city-small job takes
@@ -117,7 +118,7 @@ fn kill_9_and_restart_finishes_every_job() {
 
     let mut child = spawn(&dir, addr);
     let start = Instant::now();
-    for &id in &ids {
+    for id in &ids {
         loop {
             let (s, b) = request(addr, "GET", &format!("/v1/jobs/{id}"), b"").unwrap();
             assert_eq!(s, 200);

@@ -19,25 +19,26 @@ use optimizer::api::scene::SceneSummary;
 
 use crate::error::ApiError;
 
-/// The `{id}` of a job route.
-pub struct JobId(pub i64);
+/// The `{id}` of a job route, as given (the handlers look it up: an id
+/// that is not a job's, numeric ids of older versions included, is 404).
+pub struct JobId(pub String);
 
 /// The documented shape of the `{id}` path parameter; only its schema is
 /// used, as [`JobId`] reads the parameter with the same rules as
-/// `Path<i64>` (and answers with the same rejections).
+/// `Path<String>` (and answers with the same rejections).
 #[derive(JsonSchema)]
 #[schemars(inline)]
 struct JobIdParam {
-    /// The job's id.
+    /// The job's id (a UUID).
     #[allow(dead_code)]
-    id: i64,
+    id: String,
 }
 
 impl<S: Send + Sync> FromRequestParts<S> for JobId {
     type Rejection = PathRejection;
 
     async fn from_request_parts(parts: &mut Parts, state: &S) -> Result<Self, Self::Rejection> {
-        let Path(id) = Path::<i64>::from_request_parts(parts, state).await?;
+        let Path(id) = Path::<String>::from_request_parts(parts, state).await?;
         Ok(JobId(id))
     }
 }

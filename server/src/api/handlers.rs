@@ -33,8 +33,8 @@ pub(crate) async fn submit(
     })
 }
 
-/// Checks, stores and queues a submission. Returns the new job's id.
-fn accept(st: &AppState, sub: Submission) -> Result<i64, ApiError> {
+/// Checks, stores and queues a submission. Returns the new job's public id.
+fn accept(st: &AppState, sub: Submission) -> Result<String, ApiError> {
     check_submission(&sub.scene, &sub.job, sub.pvs.as_deref(), sub.bake)?;
     let max_queue = st.0.cfg.max_queue;
     if st.0.queue.waiting() >= max_queue {
@@ -43,34 +43,41 @@ fn accept(st: &AppState, sub: Submission) -> Result<i64, ApiError> {
             format!("the queue is full ({max_queue} jobs waiting)"),
         ));
     }
-    let id =
+    let (id, uid) =
         st.0.store
             .create(&sub.scene, &sub.job, sub.pvs.as_deref(), sub.bake)
             .map_err(ApiError::internal)?;
-    tracing::info!(job = id, "accepted");
+    tracing::info!(job = id, uid, "accepted");
     st.0.queue.push(id);
-    Ok(id)
+    Ok(uid)
 }
 
-/// The state of job `id`; 404 when there is no such job.
-fn job_state(st: &AppState, id: i64) -> Result<JobState, ApiError> {
+/// The internal id of the job of public id `uid`; 404 when there is none
+/// (numeric ids of older versions included).
+fn resolve(st: &AppState, uid: &str) -> Result<i64, ApiError> {
+    st.0.store
+        .lookup(uid)
+        .map_err(ApiError::internal)?
+        .ok_or_else(|| ApiError::no_job(uid))
+}
+
+/// The state of job `id` (public id `uid`); 404 when there is no such job.
+fn job_state(st: &AppState, id: i64, uid: &str) -> Result<JobState, ApiError> {
     Ok(st
         .0
         .store
         .row(id)
         .map_err(ApiError::internal)?
-        .ok_or_else(|| ApiError::no_job(id))?
+        .ok_or_else(|| ApiError::no_job(uid))?
         .state)
 }
 
 /// The status of job `id`: its row, with the live stage and progress while
-/// it runs.
-fn job_status(st: &AppState, id: i64) -> Result<JobStatus, ApiError> {
-    let row =
-        st.0.store
-            .row(id)
-            .map_err(ApiError::internal)?
-            .ok_or_else(|| ApiError::no_job(id))?;
+/// it runs; `None` when it is gone.
+fn job_status(st: &AppState, id: i64) -> Result<Option<JobStatus>, ApiError> {
+    let Some(row) = st.0.store.row(id).map_err(ApiError::internal)? else {
+        return Ok(None);
+    };
     let (stage, progress) = match st.0.live.progress(id) {
         Some((stage, progress)) => (Some(stage), progress),
         None => (
@@ -82,35 +89,39 @@ fn job_status(st: &AppState, id: i64) -> Result<JobStatus, ApiError> {
             },
         ),
     };
-    Ok(JobStatus {
+    Ok(Some(JobStatus {
         bake: row.bake,
         created_ms: row.created_ms,
         error: row.error,
         finished_ms: row.finished_ms,
-        id,
+        id: row.uid,
         progress,
         stage,
         started_ms: row.started_ms,
         state: row.state,
         summary: row.summary.and_then(|s| serde_json::from_str(&s).ok()),
-    })
+    }))
 }
 
 /// `GET /v1/jobs/{id}`.
 pub(crate) async fn status(
     State(st): State<AppState>,
-    JobId(id): JobId,
+    JobId(uid): JobId,
 ) -> Result<Json<JobStatus>, ApiError> {
-    Ok(Json(job_status(&st, id)?))
+    let id = resolve(&st, &uid)?;
+    Ok(Json(
+        job_status(&st, id)?.ok_or_else(|| ApiError::no_job(&uid))?,
+    ))
 }
 
 /// The query of `GET /v1/jobs`.
 #[derive(Deserialize, JsonSchema)]
 #[schemars(inline)]
 pub(crate) struct ListQuery {
-    /// List the jobs with an id greater than this.
+    /// List the jobs submitted after this one (a job's id, as in
+    /// `next_after`); from the first when absent.
     #[serde(default)]
-    after: i64,
+    after: Option<String>,
     /// Jobs per page, clamped to 1..=500.
     #[serde(default = "default_limit")]
     limit: i64,
@@ -126,32 +137,47 @@ pub(crate) async fn list(
     Query(q): Query<ListQuery>,
 ) -> Result<Json<JobList>, ApiError> {
     let limit = q.limit.clamp(1, 500);
+    let after = match &q.after {
+        None => 0,
+        Some(uid) => {
+            st.0.store
+                .lookup(uid)
+                .map_err(ApiError::internal)?
+                .ok_or_else(|| {
+                    ApiError::new(
+                        StatusCode::BAD_REQUEST,
+                        format!("after: no job {uid} (a job's id, as in next_after)"),
+                    )
+                })?
+        }
+    };
     let ids =
         st.0.store
-            .ids_after(q.after, limit)
+            .ids_after(after, limit)
             .map_err(ApiError::internal)?;
     // A job deleted between the two reads is left out of the page.
-    let jobs = ids
+    let jobs: Vec<JobStatus> = ids
         .iter()
-        .filter_map(|&id| job_status(&st, id).ok())
+        .filter_map(|&id| job_status(&st, id).ok().flatten())
         .collect();
     let next_after = (ids.len() as i64 == limit)
-        .then(|| ids.last().copied())
+        .then(|| jobs.last().map(|j| j.id.clone()))
         .flatten();
     Ok(Json(JobList { jobs, next_after }))
 }
 
-/// The bytes of result `file` of job `id`: 409 until the job has
-/// succeeded, 404 when the job has no such file.
-async fn result_file(st: &AppState, id: i64, file: &str) -> Result<Vec<u8>, ApiError> {
-    let state = job_state(st, id)?;
+/// The bytes of result `file` of the job of public id `id`: 409 until the
+/// job has succeeded, 404 when the job has no such file.
+async fn result_file(st: &AppState, id: &str, file: &str) -> Result<Vec<u8>, ApiError> {
+    let internal = resolve(st, id)?;
+    let state = job_state(st, internal, id)?;
     if state != JobState::Succeeded {
         return Err(ApiError::new(
             StatusCode::CONFLICT,
             format!("job {id} is {state}; results exist once it has succeeded"),
         ));
     }
-    match tokio::fs::read(st.0.store.job_dir(id).join(file)).await {
+    match tokio::fs::read(st.0.store.job_dir(internal).join(file)).await {
         Ok(bytes) => Ok(bytes),
         Err(e) if e.kind() == std::io::ErrorKind::NotFound => Err(ApiError::new(
             StatusCode::NOT_FOUND,
@@ -169,7 +195,7 @@ pub(crate) async fn placement(
     JobId(id): JobId,
 ) -> Result<StoredJson<Placement>, ApiError> {
     Ok(StoredJson::new(
-        result_file(&st, id, "placement.json").await?,
+        result_file(&st, &id, "placement.json").await?,
     ))
 }
 
@@ -179,7 +205,7 @@ pub(crate) async fn evaluation(
     JobId(id): JobId,
 ) -> Result<StoredJson<Evaluation>, ApiError> {
     Ok(StoredJson::new(
-        result_file(&st, id, "evaluation.json").await?,
+        result_file(&st, &id, "evaluation.json").await?,
     ))
 }
 
@@ -188,7 +214,7 @@ pub(crate) async fn impostors(
     State(st): State<AppState>,
     JobId(id): JobId,
 ) -> Result<Glb, ApiError> {
-    Ok(Glb(result_file(&st, id, "impostors.glb").await?))
+    Ok(Glb(result_file(&st, &id, "impostors.glb").await?))
 }
 
 /// `GET /v1/jobs/{id}/report`.
@@ -196,16 +222,17 @@ pub(crate) async fn report(
     State(st): State<AppState>,
     JobId(id): JobId,
 ) -> Result<HtmlPage, ApiError> {
-    Ok(HtmlPage(result_file(&st, id, "report.html").await?))
+    Ok(HtmlPage(result_file(&st, &id, "report.html").await?))
 }
 
 /// `DELETE /v1/jobs/{id}`: cancels a queued job, asks a running one to
 /// stop, deletes a finished one with its files.
 pub(crate) async fn delete(
     State(st): State<AppState>,
-    JobId(id): JobId,
+    JobId(uid): JobId,
 ) -> Result<Json<DeleteAnswer>, ApiError> {
-    let outcome = match job_state(&st, id)? {
+    let id = resolve(&st, &uid)?;
+    let outcome = match job_state(&st, id, &uid)? {
         JobState::Queued => {
             // The worker skips a job that is no longer queued.
             st.0.store
@@ -221,7 +248,10 @@ pub(crate) async fn delete(
             DeleteOutcome::Deleted
         }
     };
-    Ok(Json(DeleteAnswer { id, state: outcome }))
+    Ok(Json(DeleteAnswer {
+        id: uid,
+        state: outcome,
+    }))
 }
 
 /// `GET /healthz`.

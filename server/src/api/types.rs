@@ -39,8 +39,8 @@ pub struct JobStatus {
     pub error: Option<String>,
     /// When the job reached its final state, ms since the Unix epoch.
     pub finished_ms: Option<i64>,
-    /// The job's id.
-    pub id: i64,
+    /// The job's id (a random UUID).
+    pub id: String,
     /// Fraction of the run done: live while running, 1 once succeeded.
     #[schemars(range(min = 0.0, max = 1.0))]
     pub progress: f64,
@@ -86,15 +86,16 @@ pub struct JobSummary {
 pub struct JobList {
     /// The jobs of the page.
     pub jobs: Vec<JobStatus>,
-    /// The `after` of the next page; null on the last page.
-    pub next_after: Option<i64>,
+    /// The `after` of the next page (the last job's id); null on the last
+    /// page.
+    pub next_after: Option<String>,
 }
 
 /// A submission accepted into the queue (answered with 202).
 #[derive(Debug, Serialize, JsonSchema)]
 pub struct Accepted {
-    /// The new job's id.
-    pub id: i64,
+    /// The new job's id (a random UUID).
+    pub id: String,
     /// Always `queued`.
     pub state: JobState,
 }
@@ -139,7 +140,7 @@ pub enum DeleteOutcome {
 #[derive(Debug, Serialize, JsonSchema)]
 pub struct DeleteAnswer {
     /// The job's id.
-    pub id: i64,
+    pub id: String,
     /// What happened to the job.
     pub state: DeleteOutcome,
 }
@@ -171,7 +172,7 @@ mod tests {
             created_ms: 1,
             error: None,
             finished_ms: Some(3),
-            id: 7,
+            id: "7".into(),
             progress: 1.0,
             stage: Some("bake".into()),
             started_ms: Some(2),
@@ -180,7 +181,7 @@ mod tests {
         };
         assert_eq!(
             serde_json::to_string(&status).unwrap(),
-            r#"{"bake":true,"created_ms":1,"error":null,"finished_ms":3,"id":7,"progress":1.0,"stage":"bake","started_ms":2,"state":"succeeded","summary":{"cpvs":1,"max_ms":2.5}}"#
+            r#"{"bake":true,"created_ms":1,"error":null,"finished_ms":3,"id":"7","progress":1.0,"stage":"bake","started_ms":2,"state":"succeeded","summary":{"cpvs":1,"max_ms":2.5}}"#
         );
         assert_sorted(&status);
         assert_sorted(&JobList {
@@ -188,11 +189,11 @@ mod tests {
             next_after: None,
         });
         assert_sorted(&Accepted {
-            id: 1,
+            id: "1".into(),
             state: JobState::Queued,
         });
         assert_sorted(&DeleteAnswer {
-            id: 1,
+            id: "1".into(),
             state: DeleteOutcome::Cancelling,
         });
         assert_sorted(&Health {
