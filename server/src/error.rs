@@ -10,21 +10,34 @@ use axum::response::IntoResponse;
 
 use crate::api::types::ErrorBody;
 
-/// An error answer: status and a JSON `{"error": ...}` body.
+/// An error answer: status, a JSON `{"error": ...}` body and, for an
+/// internal error, the request id its details were logged under.
 #[derive(Debug)]
-pub struct ApiError(StatusCode, String);
+pub struct ApiError(StatusCode, String, Option<String>);
+
+/// A new id to log an internal error under: 16 random hex digits.
+pub(crate) fn new_request_id() -> String {
+    let mut id = uuid::Uuid::new_v4().simple().to_string();
+    id.truncate(16);
+    id
+}
 
 impl ApiError {
     /// An error with `status` and the message `msg`.
     pub(crate) fn new(status: StatusCode, msg: impl Into<String>) -> Self {
-        ApiError(status, msg.into())
+        ApiError(status, msg.into(), None)
     }
 
-    /// A 500 answer for a failure that is not the client's.
+    /// A 500 answer for a failure that is not the client's: its details
+    /// (which may name files and internals) go to the server's log under a
+    /// new request id, and the answer carries only that id.
     pub(crate) fn internal(e: impl std::fmt::Display) -> Self {
-        ApiError::new(
+        let id = new_request_id();
+        tracing::error!(request_id = id, "internal error: {e}");
+        ApiError(
             StatusCode::INTERNAL_SERVER_ERROR,
-            format!("internal error: {e}"),
+            format!("internal error (request {id}; the server's log has the details)"),
+            Some(id),
         )
     }
 
@@ -36,7 +49,11 @@ impl ApiError {
 
 impl IntoResponse for ApiError {
     fn into_response(self) -> axum::response::Response {
-        let mut r = (self.0, axum::Json(ErrorBody { error: self.1 })).into_response();
+        let body = ErrorBody {
+            error: self.1,
+            request_id: self.2,
+        };
+        let mut r = (self.0, axum::Json(body)).into_response();
         // A full queue drains as jobs finish: tell clients when to try again.
         if self.0 == StatusCode::TOO_MANY_REQUESTS {
             r.headers_mut()
@@ -66,5 +83,35 @@ impl OperationOutput for ApiError {
             })
             .into_iter()
             .collect()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// An internal error's answer carries a request id, never the error's
+    /// own text (which may name files of the server).
+    #[tokio::test]
+    async fn internal_errors_answer_with_a_request_id_only() {
+        let e = ApiError::internal("cannot open /srv/impostor-data/jobs.sqlite: disk I/O error");
+        let r = e.into_response();
+        assert_eq!(r.status(), StatusCode::INTERNAL_SERVER_ERROR);
+        let body = axum::body::to_bytes(r.into_body(), 1 << 16).await.unwrap();
+        let v: serde_json::Value = serde_json::from_slice(&body).unwrap();
+        let id = v["request_id"].as_str().unwrap();
+        assert_eq!(id.len(), 16);
+        assert!(id.bytes().all(|b| b.is_ascii_hexdigit()), "{id}");
+        let text = v["error"].as_str().unwrap();
+        assert!(text.contains(id), "{text}");
+        assert!(
+            !text.contains("jobs.sqlite") && !text.contains("disk"),
+            "{text}"
+        );
+        // Two errors, two ids; client errors have none.
+        assert_ne!(new_request_id(), new_request_id());
+        let r = ApiError::no_job("x").into_response();
+        let body = axum::body::to_bytes(r.into_body(), 1 << 16).await.unwrap();
+        assert_eq!(&body[..], br#"{"error":"no job x"}"#);
     }
 }

@@ -251,7 +251,11 @@ fn release_memory() {
 /// a request while it ran ends `cancelled` whatever its last stage did (its
 /// results, if written, are removed with it by a later `DELETE`); one
 /// stopped at the server's time limit (`limit_s` seconds) ends `failed`,
-/// naming the limit; a panic is an internal error, not its text.
+/// naming the limit. A failure caused by the job's input keeps the
+/// optimizer's message (it names the file and field); any other (a file
+/// of the server that cannot be read or written, a panic, a broken
+/// invariant) is logged with a request id, which is all the job's error
+/// says.
 fn final_state(
     outcome: std::thread::Result<optimizer::Result<String>>,
     stopped: Stopped,
@@ -275,13 +279,22 @@ fn final_state(
         ),
         Ok(Ok(summary)) => (JobState::Succeeded, None, Some(summary)),
         Ok(Err(optimizer::Error::Cancelled)) => cancelled(),
-        Ok(Err(e)) => (JobState::Failed, Some(e.to_string()), None),
+        Ok(Err(e)) if e.is_bad_input() => (JobState::Failed, Some(e.to_string()), None),
+        Ok(Err(e)) => (JobState::Failed, Some(internal(&e)), None),
         Err(_) => (
             JobState::Failed,
-            Some("internal error (a bug)".to_string()),
+            Some(internal(&"the optimizer panicked (a bug)")),
             None,
         ),
     }
+}
+
+/// Logs a job's internal error under a new request id; the job's error
+/// names only the id.
+fn internal(e: &dyn std::fmt::Display) -> String {
+    let id = crate::error::new_request_id();
+    tracing::error!(request_id = id, "job failed: {e}");
+    format!("internal error (request {id}; the server's log has the details)")
 }
 
 #[cfg(test)]
@@ -332,7 +345,22 @@ mod tests {
         );
         let panicked = final_state(Err(Box::new("boom")), Stopped::No, 0);
         assert_eq!(panicked.0, JobState::Failed);
-        assert_eq!(panicked.1.as_deref(), Some("internal error (a bug)"));
+        let text = panicked.1.unwrap();
+        assert!(text.starts_with("internal error (request "), "{text}");
+        assert!(!text.contains("boom"), "{text}");
+        // A file of the server that cannot be read is not named to the
+        // client; bad input is, with its field.
+        let io = optimizer::Error::io(
+            "/srv/impostor-data/jobs/7/scene",
+            std::io::Error::other("disk I/O error"),
+        );
+        let (state, error, _) = final_state(Ok(Err(io)), Stopped::No, 0);
+        assert_eq!(state, JobState::Failed);
+        let text = error.unwrap();
+        assert!(text.starts_with("internal error (request "), "{text}");
+        assert!(!text.contains("/srv") && !text.contains("disk"), "{text}");
+        let (_, error, _) = final_state(failed(), Stopped::No, 0);
+        assert_eq!(error.as_deref(), Some("job: nope"));
     }
 
     /// A job stopped at the time limit fails naming the limit, whether its

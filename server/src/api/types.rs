@@ -26,6 +26,10 @@ use crate::job::JobState;
 pub struct ErrorBody {
     /// What is wrong, naming the part or field.
     pub error: String,
+    /// For an internal error (500): the id under which the server logged
+    /// its details, which the answer does not repeat.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub request_id: Option<String>,
 }
 
 /// A job's state, stage, progress and summary or error.
@@ -202,6 +206,11 @@ mod tests {
         });
         assert_sorted(&ErrorBody {
             error: "no job 1".into(),
+            request_id: None,
+        });
+        assert_sorted(&ErrorBody {
+            error: "internal error".into(),
+            request_id: Some("0123".into()),
         });
     }
 }
