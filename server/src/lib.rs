@@ -23,8 +23,10 @@ use std::sync::Arc;
 use std::time::Duration;
 
 use axum::Router;
-use axum::extract::DefaultBodyLimit;
-use axum::http::StatusCode;
+use axum::extract::{DefaultBodyLimit, Request, State};
+use axum::http::{Method, StatusCode};
+use axum::middleware::{self, Next};
+use axum::response::{IntoResponse, Response};
 
 mod api;
 mod error;
@@ -110,10 +112,45 @@ impl AppState {
     }
 }
 
+/// Admission from the headers alone: a submission while the queue is
+/// full is answered 429, one whose `Content-Length` is over the upload
+/// limit 413, before any of its body is read, so a large upload costs the
+/// server nothing (the handler checks the queue again once it has parsed
+/// the submission, as jobs may have arrived meanwhile, and the body limit
+/// still holds for a body sent without a length).
+async fn admit(State(st): State<AppState>, req: Request, next: Next) -> Response {
+    if req.method() == Method::POST && req.uri().path() == "/v1/jobs" {
+        let max_mb = st.0.cfg.max_upload_mb;
+        let length = req
+            .headers()
+            .get(axum::http::header::CONTENT_LENGTH)
+            .and_then(|v| v.to_str().ok()?.parse::<u64>().ok());
+        if let Some(n) = length
+            && n > (max_mb as u64).saturating_mul(1024 * 1024)
+        {
+            return ApiError::new(
+                StatusCode::PAYLOAD_TOO_LARGE,
+                format!("the body is {n} bytes, larger than the upload limit ({max_mb} MiB)"),
+            )
+            .into_response();
+        }
+        let max_queue = st.0.cfg.max_queue;
+        if st.0.queue.waiting() >= max_queue {
+            return ApiError::new(
+                StatusCode::TOO_MANY_REQUESTS,
+                format!("the queue is full ({max_queue} jobs waiting)"),
+            )
+            .into_response();
+        }
+    }
+    next.run(req).await
+}
+
 /// The router of the service.
 pub fn app(state: AppState) -> Router {
     let limit = state.0.cfg.max_upload_mb.saturating_mul(1024 * 1024);
     api::router()
+        .layer(middleware::from_fn_with_state(state.clone(), admit))
         .layer(DefaultBodyLimit::max(limit))
         .layer(tower_http::timeout::TimeoutLayer::with_status_code(
             StatusCode::REQUEST_TIMEOUT,

@@ -343,6 +343,61 @@ async fn full_queue_and_cancellation() {
     assert_eq!(s, 409);
 }
 
+/// Sends only the headers of a submission whose body would be `length`
+/// bytes, then reads the answer (within 10 s): what the server decides
+/// before reading any of the body. Returns the status.
+async fn answer_to_headers(addr: SocketAddr, length: u64) -> u16 {
+    use tokio::io::{AsyncReadExt, AsyncWriteExt};
+    let mut s = tokio::net::TcpStream::connect(addr).await.unwrap();
+    let head = format!(
+        "POST /v1/jobs HTTP/1.1\r\nHost: test\r\nContent-Type: application/json\r\nContent-Length: {length}\r\n\r\n"
+    );
+    s.write_all(head.as_bytes()).await.unwrap();
+    let mut raw = vec![0u8; 4096];
+    let n = tokio::time::timeout(Duration::from_secs(10), s.read(&mut raw))
+        .await
+        .expect("no answer before the body was sent")
+        .unwrap();
+    let text = String::from_utf8_lossy(&raw[..n]).to_string();
+    text.get(9..12)
+        .and_then(|c| c.parse().ok())
+        .unwrap_or_else(|| panic!("{text}"))
+}
+
+/// Admission is decided from the headers: a 1 GB submission to a full
+/// queue is refused with 429, and one over the upload limit with 413,
+/// before a byte of its body has been sent; the same headers with room in
+/// the queue and under the limit wait for the body.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn admission_is_decided_before_the_body_is_read() {
+    let mut cfg = Config::new(temp_dir("admission"));
+    cfg.max_queue = 0;
+    cfg.max_upload_mb = 2048;
+    let addr = start(cfg).await;
+    assert_eq!(answer_to_headers(addr, 1 << 30).await, 429);
+
+    let mut cfg = Config::new(temp_dir("admission-size"));
+    cfg.max_upload_mb = 256;
+    let addr = start(cfg).await;
+    assert_eq!(answer_to_headers(addr, 1 << 30).await, 413);
+    // The control: a submission the server may accept is read, so no
+    // answer comes while its body is missing.
+    let mut s = tokio::net::TcpStream::connect(addr).await.unwrap();
+    use tokio::io::{AsyncReadExt, AsyncWriteExt};
+    s.write_all(
+        b"POST /v1/jobs HTTP/1.1\r\nHost: test\r\nContent-Type: application/json\r\nContent-Length: 1000\r\n\r\n",
+    )
+    .await
+    .unwrap();
+    let mut raw = [0u8; 64];
+    assert!(
+        tokio::time::timeout(Duration::from_secs(1), s.read(&mut raw))
+            .await
+            .is_err(),
+        "answered before the body"
+    );
+}
+
 /// The server's per-job limits: a job running past `--job-max-seconds`
 /// is stopped and fails naming the limit; one predicted to need more than
 /// `--job-max-memory` fails naming that limit, before allocating it.
