@@ -63,8 +63,9 @@ async fn main() -> std::io::Result<()> {
     .await?;
     assert_eq!(status, 202, "{}", String::from_utf8_lossy(&b));
     let id = serde_json::from_slice::<Value>(&b)?["id"]
-        .as_i64()
-        .unwrap_or(1);
+        .as_str()
+        .ok_or_else(|| std::io::Error::other("the answer has no job id"))?
+        .to_string();
     let path = format!("/v1/jobs/{id}");
 
     let mut tick = tokio::time::interval(Duration::from_micros(1_000_000 / rate));

@@ -28,6 +28,8 @@ fn new_uid() -> String {
 
 /// One row of the `jobs` table.
 pub(crate) struct JobRow {
+    /// The internal id.
+    pub id: i64,
     /// The public id.
     pub uid: String,
     pub state: JobState,
@@ -252,12 +254,29 @@ impl Store {
     /// The row of job `id`; `Ok(None)` when there is no such job (or its
     /// row cannot be read).
     pub fn row(&self, id: i64) -> io::Result<Option<JobRow>> {
+        self.row_where("id = ?1", &id)
+    }
+
+    /// The row of the job of public id `uid`, in one query; `Ok(None)` when
+    /// there is none.
+    pub fn find(&self, uid: &str) -> io::Result<Option<JobRow>> {
+        self.row_where("uid = ?1", &uid)
+    }
+
+    fn row_where(
+        &self,
+        condition: &str,
+        param: &dyn rusqlite::ToSql,
+    ) -> io::Result<Option<JobRow>> {
         let db = self.db()?;
         Ok(db
             .query_row(
-                "SELECT state, stage, error, summary, bake, created_ms, started_ms, finished_ms, uid
-                 FROM jobs WHERE id = ?1",
-                [id],
+                &format!(
+                    "SELECT state, stage, error, summary, bake, created_ms, started_ms, finished_ms,
+                            uid, id
+                     FROM jobs WHERE {condition}"
+                ),
+                [param],
                 |r| {
                     Ok(JobRow {
                         state: r.get(0)?,
@@ -269,6 +288,7 @@ impl Store {
                         started_ms: r.get(6)?,
                         finished_ms: r.get(7)?,
                         uid: r.get(8)?,
+                        id: r.get(9)?,
                     })
                 },
             )

@@ -16,6 +16,7 @@ use super::types::{Accepted, DeleteAnswer, DeleteOutcome, Health, JobList, JobSt
 use crate::error::ApiError;
 use crate::job::{CANCELLED_BY_REQUEST, JobState};
 use crate::pipeline::check_submission;
+use crate::store::JobRow;
 use crate::{AppState, OPTIMIZER_VERSION};
 
 /// `POST /v1/jobs`: checks and stores a submission, then queues it.
@@ -52,33 +53,19 @@ fn accept(st: &AppState, sub: Submission) -> Result<String, ApiError> {
     Ok(uid)
 }
 
-/// The internal id of the job of public id `uid`; 404 when there is none
+/// The row of the job of public id `uid`; 404 when there is none
 /// (numeric ids of older versions included).
-fn resolve(st: &AppState, uid: &str) -> Result<i64, ApiError> {
+fn find(st: &AppState, uid: &str) -> Result<JobRow, ApiError> {
     st.0.store
-        .lookup(uid)
+        .find(uid)
         .map_err(ApiError::internal)?
         .ok_or_else(|| ApiError::no_job(uid))
 }
 
-/// The state of job `id` (public id `uid`); 404 when there is no such job.
-fn job_state(st: &AppState, id: i64, uid: &str) -> Result<JobState, ApiError> {
-    Ok(st
-        .0
-        .store
-        .row(id)
-        .map_err(ApiError::internal)?
-        .ok_or_else(|| ApiError::no_job(uid))?
-        .state)
-}
-
-/// The status of job `id`: its row, with the live stage and progress while
-/// it runs; `None` when it is gone.
-fn job_status(st: &AppState, id: i64) -> Result<Option<JobStatus>, ApiError> {
-    let Some(row) = st.0.store.row(id).map_err(ApiError::internal)? else {
-        return Ok(None);
-    };
-    let (stage, progress) = match st.0.live.progress(id) {
+/// The status of the job of `row`, with the live stage and progress while
+/// it runs.
+fn job_status(st: &AppState, row: JobRow) -> JobStatus {
+    let (stage, progress) = match st.0.live.progress(row.id) {
         Some((stage, progress)) => (Some(stage), progress),
         None => (
             row.stage,
@@ -89,7 +76,7 @@ fn job_status(st: &AppState, id: i64) -> Result<Option<JobStatus>, ApiError> {
             },
         ),
     };
-    Ok(Some(JobStatus {
+    JobStatus {
         bake: row.bake,
         created_ms: row.created_ms,
         error: row.error,
@@ -100,7 +87,7 @@ fn job_status(st: &AppState, id: i64) -> Result<Option<JobStatus>, ApiError> {
         started_ms: row.started_ms,
         state: row.state,
         summary: row.summary.and_then(|s| serde_json::from_str(&s).ok()),
-    }))
+    }
 }
 
 /// `GET /v1/jobs/{id}`.
@@ -108,10 +95,7 @@ pub(crate) async fn status(
     State(st): State<AppState>,
     JobId(uid): JobId,
 ) -> Result<Json<JobStatus>, ApiError> {
-    let id = resolve(&st, &uid)?;
-    Ok(Json(
-        job_status(&st, id)?.ok_or_else(|| ApiError::no_job(&uid))?,
-    ))
+    Ok(Json(job_status(&st, find(&st, &uid)?)))
 }
 
 /// The query of `GET /v1/jobs`.
@@ -158,7 +142,8 @@ pub(crate) async fn list(
     // A job deleted between the two reads is left out of the page.
     let jobs: Vec<JobStatus> = ids
         .iter()
-        .filter_map(|&id| job_status(&st, id).ok().flatten())
+        .filter_map(|&id| st.0.store.row(id).ok().flatten())
+        .map(|row| job_status(&st, row))
         .collect();
     let next_after = (ids.len() as i64 == limit)
         .then(|| jobs.last().map(|j| j.id.clone()))
@@ -169,15 +154,15 @@ pub(crate) async fn list(
 /// The bytes of result `file` of the job of public id `id`: 409 until the
 /// job has succeeded, 404 when the job has no such file.
 async fn result_file(st: &AppState, id: &str, file: &str) -> Result<Vec<u8>, ApiError> {
-    let internal = resolve(st, id)?;
-    let state = job_state(st, internal, id)?;
+    let row = find(st, id)?;
+    let state = row.state;
     if state != JobState::Succeeded {
         return Err(ApiError::new(
             StatusCode::CONFLICT,
             format!("job {id} is {state}; results exist once it has succeeded"),
         ));
     }
-    match tokio::fs::read(st.0.store.job_dir(internal).join(file)).await {
+    match tokio::fs::read(st.0.store.job_dir(row.id).join(file)).await {
         Ok(bytes) => Ok(bytes),
         Err(e) if e.kind() == std::io::ErrorKind::NotFound => Err(ApiError::new(
             StatusCode::NOT_FOUND,
@@ -231,8 +216,9 @@ pub(crate) async fn delete(
     State(st): State<AppState>,
     JobId(uid): JobId,
 ) -> Result<Json<DeleteAnswer>, ApiError> {
-    let id = resolve(&st, &uid)?;
-    let outcome = match job_state(&st, id, &uid)? {
+    let row = find(&st, &uid)?;
+    let id = row.id;
+    let outcome = match row.state {
         JobState::Queued => {
             // The worker skips a job that is no longer queued.
             st.0.store
