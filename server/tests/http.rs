@@ -343,6 +343,90 @@ async fn full_queue_and_cancellation() {
     assert_eq!(s, 409);
 }
 
+/// A job's event stream delivers its state, stage and progress as they
+/// change, stages in pipeline order and progress never going back, and
+/// ends with the final state; an unknown job's stream is 404.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn the_event_stream_follows_a_job_to_its_final_state() {
+    let addr = start(Config::new(temp_dir("events"))).await;
+    let (s, _) = get_json(addr, "/v1/jobs/0b5e6a1c-3f1d-4c55-9a57-2f0e8f3f6d21/events").await;
+    assert_eq!(s, 404);
+    let summary = serde_json::to_value(
+        optimizer::scene::gltf_load::load_scene_bytes(&city(0.1), "c")
+            .unwrap()
+            .summary(),
+    )
+    .unwrap();
+    let body =
+        json!({"scene": summary, "job": serde_json::from_slice::<Value>(&job_json()).unwrap()});
+    let (s, b) = submit_json(addr, &body).await;
+    assert_eq!(s, 202, "{}", String::from_utf8_lossy(&b));
+    let id = serde_json::from_slice::<Value>(&b).unwrap()["id"]
+        .as_str()
+        .unwrap()
+        .to_string();
+    // The stream ends by itself after the final state (the request helper
+    // reads to the end of the answer).
+    let (s, raw) = tokio::time::timeout(
+        Duration::from_secs(120),
+        request(addr, "GET", &format!("/v1/jobs/{id}/events"), None, b""),
+    )
+    .await
+    .expect("the stream did not end");
+    assert_eq!(s, 200);
+    let text = String::from_utf8(raw).unwrap();
+    let events: Vec<Value> = text
+        .lines()
+        .filter_map(|l| l.strip_prefix("data: "))
+        .map(|d| serde_json::from_str(d).unwrap())
+        .collect();
+    assert_eq!(
+        text.lines().filter(|l| *l == "event: status").count(),
+        events.len()
+    );
+    let last = events.last().unwrap();
+    assert_eq!(last["state"], "succeeded", "{text}");
+    assert_eq!(last["progress"], 1.0);
+    let order = [
+        "loading",
+        "hierarchy",
+        "problem_views",
+        "candidates",
+        "greedy",
+        "placement",
+        "evaluate",
+        "bake",
+    ];
+    let stages: Vec<usize> = events
+        .iter()
+        .filter_map(|e| e["stage"].as_str())
+        .map(|s| {
+            order
+                .iter()
+                .position(|o| *o == s)
+                .unwrap_or_else(|| panic!("{s}"))
+        })
+        .collect();
+    assert!(stages.windows(2).all(|w| w[0] <= w[1]), "{text}");
+    // It saw the placement's stages, not only the end.
+    assert!(stages.contains(&2) && stages.contains(&6), "{text}");
+    let progress: Vec<f64> = events
+        .iter()
+        .map(|e| e["progress"].as_f64().unwrap())
+        .collect();
+    assert!(progress.windows(2).all(|w| w[0] <= w[1]), "{text}");
+    assert!(events.windows(2).all(|w| w[0] != w[1]), "{text}");
+    // A finished job's stream is its final state alone.
+    let (s, raw) = request(addr, "GET", &format!("/v1/jobs/{id}/events"), None, b"").await;
+    assert_eq!(s, 200);
+    let text = String::from_utf8(raw).unwrap();
+    assert_eq!(
+        text.lines().filter(|l| l.starts_with("data: ")).count(),
+        1,
+        "{text}"
+    );
+}
+
 /// Sends only the headers of a submission whose body would be `length`
 /// bytes, then reads the answer (within 10 s): what the server decides
 /// before reading any of the body. Returns the status.
@@ -594,6 +678,7 @@ async fn openapi_documents_every_route_and_every_reference_resolves() {
         ),
         ("/v1/jobs/{id}", "get", &["200", "404", "500"]),
         ("/v1/jobs/{id}", "delete", &["200", "404", "500"]),
+        ("/v1/jobs/{id}/events", "get", &["200", "404", "500"]),
         ("/v1/jobs/{id}/placement", "get", results),
         ("/v1/jobs/{id}/evaluation", "get", results),
         ("/v1/jobs/{id}/impostors.glb", "get", results),
@@ -619,7 +704,7 @@ async fn openapi_documents_every_route_and_every_reference_resolves() {
     }
     assert_eq!(
         doc["paths"].as_object().unwrap().len(),
-        8,
+        9,
         "undocumented or unknown paths"
     );
 
@@ -644,6 +729,10 @@ async fn openapi_documents_every_route_and_every_reference_resolves() {
             "{method} {path}"
         );
     }
+    assert_eq!(
+        schema_of("/v1/jobs/{id}/events", "get", "200", "text/event-stream"),
+        "#/components/schemas/JobEvent"
+    );
     let body = &doc["paths"]["/v1/jobs"]["post"]["requestBody"]["content"];
     let upload = &body["multipart/form-data"]["schema"]["properties"];
     assert_eq!(upload["job"]["$ref"], "#/components/schemas/Job");

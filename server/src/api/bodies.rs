@@ -87,6 +87,33 @@ impl<T: JsonSchema> OperationOutput for StoredJson<T> {
     }
 }
 
+/// A stream of server-sent events, each `event: status` with a
+/// [`JobEvent`](super::types::JobEvent) as its JSON data.
+pub struct EventStream(pub Response);
+
+impl IntoResponse for EventStream {
+    fn into_response(self) -> Response {
+        self.0
+    }
+}
+
+impl OperationOutput for EventStream {
+    type Inner = super::types::JobEvent;
+
+    fn inferred_responses(
+        ctx: &mut GenContext,
+        _operation: &mut Operation,
+    ) -> Vec<(Option<StatusCode>, DocResponse)> {
+        let schema = ctx.schema.subschema_for::<super::types::JobEvent>();
+        ok_response(
+            "server-sent events (`event: status`, data: a JobEvent as JSON) whenever the \
+             job's state, stage or progress changes; the stream ends after the final state",
+            "text/event-stream",
+            Some(schema),
+        )
+    }
+}
+
 /// The baked impostors: a GLB file.
 pub struct Glb(pub Vec<u8>);
 

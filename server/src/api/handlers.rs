@@ -10,9 +10,11 @@ use serde::Deserialize;
 use optimizer::api::evaluation::Evaluation;
 use optimizer::api::placement::Placement;
 
-use super::bodies::{Glb, HtmlPage, OpenApiJson, StoredJson};
+use axum::response::IntoResponse;
+
+use super::bodies::{EventStream, Glb, HtmlPage, OpenApiJson, StoredJson};
 use super::extract::{JobId, Submission};
-use super::types::{Accepted, DeleteAnswer, DeleteOutcome, Health, JobList, JobStatus};
+use super::types::{Accepted, DeleteAnswer, DeleteOutcome, Health, JobEvent, JobList, JobStatus};
 use crate::error::ApiError;
 use crate::job::{CANCELLED_BY_REQUEST, JobState};
 use crate::pipeline::check_submission;
@@ -172,6 +174,60 @@ async fn result_file(st: &AppState, id: &str, file: &str) -> Result<Vec<u8>, Api
         )),
         Err(e) => Err(ApiError::internal(e)),
     }
+}
+
+/// How often an event stream looks at its job.
+const EVENT_POLL: std::time::Duration = std::time::Duration::from_millis(100);
+
+/// The event of the job of internal id `id` now; `None` once it is gone.
+fn job_event(st: &AppState, id: i64) -> Option<JobEvent> {
+    let row = st.0.store.row(id).ok().flatten()?;
+    let status = job_status(st, row);
+    Some(JobEvent {
+        error: status.error,
+        progress: status.progress,
+        stage: status.stage,
+        state: status.state,
+    })
+}
+
+/// `GET /v1/jobs/{id}/events`: the job's state, stage and progress as
+/// server-sent events, one whenever they change (looked at every 100 ms),
+/// ending after its final state (or when the job is deleted).
+pub(crate) async fn events(
+    State(st): State<AppState>,
+    JobId(uid): JobId,
+) -> Result<EventStream, ApiError> {
+    use axum::response::sse::{Event, KeepAlive, Sse};
+    let id = find(&st, &uid)?.id;
+    let stream = futures_util::stream::unfold(
+        (st, None::<JobEvent>, false),
+        move |(st, last, done)| async move {
+            if done {
+                return None;
+            }
+            loop {
+                let now = {
+                    let st = st.clone();
+                    tokio::task::spawn_blocking(move || job_event(&st, id))
+                        .await
+                        .ok()
+                        .flatten()?
+                };
+                if last.as_ref() != Some(&now) {
+                    let event = Event::default().event("status").json_data(&now);
+                    let done = now.state.is_final();
+                    return Some((event, (st, Some(now), done)));
+                }
+                tokio::time::sleep(EVENT_POLL).await;
+            }
+        },
+    );
+    Ok(EventStream(
+        Sse::new(stream)
+            .keep_alive(KeepAlive::default())
+            .into_response(),
+    ))
 }
 
 /// `GET /v1/jobs/{id}/placement`.

@@ -118,6 +118,15 @@ fn routes() -> ApiRouter<AppState> {
             }),
         )
         .api_route(
+            "/v1/jobs/{id}/events",
+            get_with(handlers::events, |op| {
+                job_errors(op).id("job_events").summary(
+                    "the job's state, stage and progress as server-sent events, ending after \
+                     its final state",
+                )
+            }),
+        )
+        .api_route(
             "/v1/jobs/{id}/placement",
             get_with(handlers::placement, |op| {
                 result_errors(op)

@@ -60,6 +60,22 @@ pub struct JobStatus {
     pub summary: Option<Value>,
 }
 
+/// One event of `GET /v1/jobs/{id}/events` (`event: status`): the job's
+/// state, stage and progress, sent whenever one of them changes; the last
+/// event of a stream is the job's final state.
+#[derive(Clone, Debug, PartialEq, Serialize, JsonSchema)]
+pub struct JobEvent {
+    /// Why the job failed or was cancelled (final events).
+    pub error: Option<String>,
+    /// Fraction of the run done.
+    #[schemars(range(min = 0.0, max = 1.0))]
+    pub progress: f64,
+    /// The running stage, as in the job's status.
+    pub stage: Option<String>,
+    /// Where the job is in its life.
+    pub state: JobState,
+}
+
 /// A succeeded job's summary: the placement's totals with the evaluation's
 /// worst frame time, violations and parallax, and the stage timings.
 #[derive(Debug, Serialize, JsonSchema)]
