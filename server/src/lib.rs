@@ -61,6 +61,9 @@ pub struct Config {
     /// (`--job-max-memory`; default: the machine's): a job predicted to need
     /// more ends `failed` before the memory is allocated.
     pub job_max_memory_bytes: Option<u64>,
+    /// How long a finished job (succeeded, failed or cancelled) and its
+    /// files are kept, days (`--retain-days`; default: for ever).
+    pub retain_days: Option<f64>,
 }
 
 impl Config {
@@ -74,6 +77,7 @@ impl Config {
             eval_views: 10_000,
             job_max_seconds: None,
             job_max_memory_bytes: None,
+            retain_days: None,
         }
     }
 }
@@ -108,8 +112,40 @@ impl AppState {
             state.0.queue.push(id);
         }
         worker::spawn_workers(&state, rx, workers)?;
+        if let Some(days) = state.0.cfg.retain_days {
+            spawn_retention(&state, days)?;
+        }
         Ok(state)
     }
+}
+
+/// Removes the jobs that finished more than `days` ago, with their files,
+/// now and then (a tenth of the retention, between 0.2 s and an hour), on
+/// a thread of its own.
+fn spawn_retention(state: &AppState, days: f64) -> std::io::Result<()> {
+    let keep_ms = days * 86_400_000.0;
+    let every = Duration::from_secs_f64((keep_ms / 10_000.0).clamp(0.2, 3600.0));
+    let st = state.clone();
+    std::thread::Builder::new()
+        .name("retention".into())
+        .spawn(move || {
+            loop {
+                let cutoff = store::now_ms() - keep_ms as i64;
+                match st.0.store.finished_before(cutoff) {
+                    Ok(ids) => {
+                        for id in ids {
+                            match st.0.store.delete(id) {
+                                Ok(()) => tracing::info!(job = id, "removed after --retain-days"),
+                                Err(e) => tracing::warn!(job = id, "not removed: {e}"),
+                            }
+                        }
+                    }
+                    Err(e) => tracing::warn!("retention: {e}"),
+                }
+                std::thread::sleep(every);
+            }
+        })?;
+    Ok(())
 }
 
 /// Admission from the headers alone: a submission while the queue is

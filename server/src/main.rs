@@ -34,6 +34,18 @@ struct Cli {
     /// (default: the machine's memory).
     #[arg(long, value_name = "GB", value_parser = parse_gb)]
     job_max_memory: Option<u64>,
+    /// Remove finished jobs (succeeded, failed or cancelled) and their files
+    /// this many days after they finished (default: keep them).
+    #[arg(long, value_name = "DAYS", value_parser = parse_days)]
+    retain_days: Option<f64>,
+}
+
+/// A positive number of days.
+fn parse_days(s: &str) -> Result<f64, String> {
+    match s.parse::<f64>() {
+        Ok(d) if d.is_finite() && d > 0.0 && d <= 1e6 => Ok(d),
+        _ => Err(format!("expected a positive number of days, got {s:?}")),
+    }
 }
 
 /// A positive number of GB, as bytes.
@@ -60,6 +72,7 @@ async fn main() -> std::io::Result<()> {
     cfg.max_queue = cli.max_queue.max(1);
     cfg.job_max_seconds = cli.job_max_seconds;
     cfg.job_max_memory_bytes = cli.job_max_memory;
+    cfg.retain_days = cli.retain_days;
     let state = AppState::open(cfg)?;
     let listener = tokio::net::TcpListener::bind(&cli.listen).await?;
     tracing::info!("listening on {}", listener.local_addr()?);

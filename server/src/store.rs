@@ -46,7 +46,7 @@ pub(crate) struct JobRow {
 }
 
 /// Milliseconds since the Unix epoch.
-fn now_ms() -> i64 {
+pub(crate) fn now_ms() -> i64 {
     SystemTime::now()
         .duration_since(UNIX_EPOCH)
         .map_or(0, |d| d.as_millis() as i64)
@@ -305,6 +305,30 @@ impl Store {
             .map_err(db_err)?
             .collect::<rusqlite::Result<_>>()
             .map_err(db_err)
+    }
+
+    /// The jobs that reached a final state before `cutoff_ms` (ms since
+    /// the Unix epoch), oldest first.
+    pub fn finished_before(&self, cutoff_ms: i64) -> io::Result<Vec<i64>> {
+        let db = self.db()?;
+        let mut stmt = db
+            .prepare(
+                "SELECT id FROM jobs WHERE finished_ms IS NOT NULL AND finished_ms < ?1
+                 AND state IN (?2, ?3, ?4) ORDER BY id",
+            )
+            .map_err(db_err)?;
+        stmt.query_map(
+            rusqlite::params![
+                cutoff_ms,
+                JobState::Succeeded,
+                JobState::Failed,
+                JobState::Cancelled
+            ],
+            |r| r.get(0),
+        )
+        .map_err(db_err)?
+        .collect::<rusqlite::Result<_>>()
+        .map_err(db_err)
     }
 
     /// Removes job `id`'s row, then its files.

@@ -343,6 +343,56 @@ async fn full_queue_and_cancellation() {
     assert_eq!(s, 409);
 }
 
+/// `--retain-days`: a finished job stays while it is younger than the
+/// retention, then it and its files are removed.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn finished_jobs_are_removed_after_the_retention() {
+    let dir = temp_dir("retention");
+    let mut cfg = Config::new(&dir);
+    cfg.retain_days = Some(4.0 / 86_400.0);
+    let addr = start(cfg).await;
+    let summary = serde_json::to_value(
+        optimizer::scene::gltf_load::load_scene_bytes(&city(0.1), "c")
+            .unwrap()
+            .summary(),
+    )
+    .unwrap();
+    let body =
+        json!({"scene": summary, "job": serde_json::from_slice::<Value>(&job_json()).unwrap()});
+    let (s, b) = submit_json(addr, &body).await;
+    assert_eq!(s, 202, "{}", String::from_utf8_lossy(&b));
+    let id = serde_json::from_slice::<Value>(&b).unwrap()["id"]
+        .as_str()
+        .unwrap()
+        .to_string();
+    let v = wait_final(addr, &id, Duration::from_secs(120)).await;
+    assert_eq!(v["state"], "succeeded", "{v}");
+    let finished = Instant::now();
+    // Still there just after it finished, with its files.
+    let (s, _) = get_json(addr, &format!("/v1/jobs/{id}/evaluation")).await;
+    assert_eq!(s, 200);
+    let files = || std::fs::read_dir(dir.join("jobs")).unwrap().count();
+    assert_eq!(files(), 1);
+    loop {
+        let (s, _) = get_json(addr, &format!("/v1/jobs/{id}")).await;
+        if s == 404 {
+            break;
+        }
+        assert_eq!(s, 200);
+        assert!(
+            finished.elapsed() < Duration::from_secs(30),
+            "not removed after 30 s"
+        );
+        tokio::time::sleep(Duration::from_millis(200)).await;
+    }
+    assert!(
+        finished.elapsed() > Duration::from_secs(2),
+        "removed {:?} after it finished, before its time",
+        finished.elapsed()
+    );
+    assert_eq!(files(), 0, "its folder is left");
+}
+
 /// A job's event stream delivers its state, stage and progress as they
 /// change, stages in pipeline order and progress never going back, and
 /// ends with the final state; an unknown job's stream is 404.

@@ -55,13 +55,30 @@ fn accept(st: &AppState, sub: Submission) -> Result<String, ApiError> {
     Ok(uid)
 }
 
-/// The row of the job of public id `uid`; 404 when there is none
-/// (numeric ids of older versions included).
-fn find(st: &AppState, uid: &str) -> Result<JobRow, ApiError> {
-    st.0.store
-        .find(uid)
+/// Runs `f` on the blocking pool, off the async runtime: the database
+/// and the job folders are read and written with blocking calls, which
+/// must not hold up the runtime's threads (and so every other request).
+async fn blocking<T: Send + 'static>(
+    st: &AppState,
+    f: impl FnOnce(&AppState) -> Result<T, ApiError> + Send + 'static,
+) -> Result<T, ApiError> {
+    let st = st.clone();
+    tokio::task::spawn_blocking(move || f(&st))
+        .await
         .map_err(ApiError::internal)?
-        .ok_or_else(|| ApiError::no_job(uid))
+}
+
+/// The row of the job of public id `uid` (read on the blocking pool); 404
+/// when there is none (numeric ids of older versions included).
+async fn find(st: &AppState, uid: &str) -> Result<JobRow, ApiError> {
+    let uid = uid.to_string();
+    blocking(st, move |st| {
+        st.0.store
+            .find(&uid)
+            .map_err(ApiError::internal)?
+            .ok_or_else(|| ApiError::no_job(&uid))
+    })
+    .await
 }
 
 /// The status of the job of `row`, with the live stage and progress while
@@ -97,7 +114,8 @@ pub(crate) async fn status(
     State(st): State<AppState>,
     JobId(uid): JobId,
 ) -> Result<Json<JobStatus>, ApiError> {
-    Ok(Json(job_status(&st, find(&st, &uid)?)))
+    let row = find(&st, &uid).await?;
+    Ok(Json(job_status(&st, row)))
 }
 
 /// The query of `GET /v1/jobs`.
@@ -122,6 +140,11 @@ pub(crate) async fn list(
     State(st): State<AppState>,
     Query(q): Query<ListQuery>,
 ) -> Result<Json<JobList>, ApiError> {
+    blocking(&st, move |st| list_page(st, q)).await.map(Json)
+}
+
+/// A page of `GET /v1/jobs` (blocking: database reads).
+fn list_page(st: &AppState, q: ListQuery) -> Result<JobList, ApiError> {
     let limit = q.limit.clamp(1, 500);
     let after = match &q.after {
         None => 0,
@@ -145,18 +168,18 @@ pub(crate) async fn list(
     let jobs: Vec<JobStatus> = ids
         .iter()
         .filter_map(|&id| st.0.store.row(id).ok().flatten())
-        .map(|row| job_status(&st, row))
+        .map(|row| job_status(st, row))
         .collect();
     let next_after = (ids.len() as i64 == limit)
         .then(|| jobs.last().map(|j| j.id.clone()))
         .flatten();
-    Ok(Json(JobList { jobs, next_after }))
+    Ok(JobList { jobs, next_after })
 }
 
 /// The bytes of result `file` of the job of public id `id`: 409 until the
 /// job has succeeded, 404 when the job has no such file.
 async fn result_file(st: &AppState, id: &str, file: &str) -> Result<Vec<u8>, ApiError> {
-    let row = find(st, id)?;
+    let row = find(st, id).await?;
     let state = row.state;
     if state != JobState::Succeeded {
         return Err(ApiError::new(
@@ -199,7 +222,7 @@ pub(crate) async fn events(
     JobId(uid): JobId,
 ) -> Result<EventStream, ApiError> {
     use axum::response::sse::{Event, KeepAlive, Sse};
-    let id = find(&st, &uid)?.id;
+    let id = find(&st, &uid).await?.id;
     let stream = futures_util::stream::unfold(
         (st, None::<JobEvent>, false),
         move |(st, last, done)| async move {
@@ -272,24 +295,28 @@ pub(crate) async fn delete(
     State(st): State<AppState>,
     JobId(uid): JobId,
 ) -> Result<Json<DeleteAnswer>, ApiError> {
-    let row = find(&st, &uid)?;
+    let row = find(&st, &uid).await?;
     let id = row.id;
-    let outcome = match row.state {
-        JobState::Queued => {
-            // The worker skips a job that is no longer queued.
-            st.0.store
-                .set_state(id, JobState::Cancelled, Some(CANCELLED_BY_REQUEST), None);
-            DeleteOutcome::Cancelled
-        }
-        JobState::Running => {
-            st.0.live.cancel(id);
-            DeleteOutcome::Cancelling
-        }
-        JobState::Succeeded | JobState::Failed | JobState::Cancelled => {
-            st.0.store.delete(id).map_err(ApiError::internal)?;
-            DeleteOutcome::Deleted
-        }
-    };
+    // Removing a job's folder may take a while: on the blocking pool.
+    let outcome = blocking(&st, move |st| {
+        Ok(match row.state {
+            JobState::Queued => {
+                // The worker skips a job that is no longer queued.
+                st.0.store
+                    .set_state(id, JobState::Cancelled, Some(CANCELLED_BY_REQUEST), None);
+                DeleteOutcome::Cancelled
+            }
+            JobState::Running => {
+                st.0.live.cancel(id);
+                DeleteOutcome::Cancelling
+            }
+            JobState::Succeeded | JobState::Failed | JobState::Cancelled => {
+                st.0.store.delete(id).map_err(ApiError::internal)?;
+                DeleteOutcome::Deleted
+            }
+        })
+    })
+    .await?;
     Ok(Json(DeleteAnswer {
         id: uid,
         state: outcome,
