@@ -1,5 +1,6 @@
-//! Durability: the service binary killed with SIGKILL mid-job and restarted
-//! on the same data directory finishes every accepted job.
+//! Durability: the service binary killed with SIGKILL, or stopped with
+//! SIGTERM, mid-job and restarted on the same data directory finishes every
+//! accepted job.
 
 use std::io::{Read, Write};
 use std::net::{SocketAddr, TcpStream};
@@ -59,7 +60,50 @@ fn fresh(name: &str) -> (std::path::PathBuf, SocketAddr) {
 
 #[test]
 fn kill_9_and_restart_finishes_every_job() {
-    let (dir, addr) = fresh("restart");
+    stop_mid_job_and_restart("restart", |child| {
+        child.kill().unwrap(); // SIGKILL
+        child.wait().unwrap();
+    });
+}
+
+/// SIGTERM mid-job (what a service manager sends): the server stops
+/// admitting, exits 0, and the job it was running completes after the
+/// restart with the command line's bytes.
+#[test]
+#[cfg(unix)]
+fn sigterm_mid_job_and_restart_finishes_every_job() {
+    stop_mid_job_and_restart("sigterm-mid-job", |child| {
+        let status = terminate(child);
+        assert_eq!(status.code(), Some(0), "{status:?}");
+    });
+}
+
+/// Sends SIGTERM to `child` and waits (at most 20 s) for it to exit.
+#[cfg(unix)]
+fn terminate(child: &mut Child) -> std::process::ExitStatus {
+    let sent = Command::new("kill")
+        .args(["-TERM", &child.id().to_string()])
+        .status()
+        .expect("run kill");
+    assert!(sent.success());
+    let start = Instant::now();
+    loop {
+        if let Some(status) = child.try_wait().unwrap() {
+            return status;
+        }
+        if start.elapsed() > Duration::from_secs(20) {
+            child.kill().unwrap();
+            panic!("the server did not stop within 20 s of SIGTERM");
+        }
+        std::thread::sleep(Duration::from_millis(50));
+    }
+}
+
+/// Submits three jobs, stops the server with `stop` while the first is
+/// being placed, restarts it on the same data folder and checks that every
+/// job succeeds with the command line's placement bytes.
+fn stop_mid_job_and_restart(name: &str, stop: impl FnOnce(&mut Child)) {
+    let (dir, addr) = fresh(name);
     let glb = optimizer::citygen::generate(&optimizer::citygen::CityParams {
         seed: 1,
         scale: 0.1,
@@ -113,8 +157,7 @@ fn kill_9_and_restart_finishes_every_job() {
         );
         std::thread::sleep(Duration::from_millis(10));
     }
-    child.kill().unwrap(); // SIGKILL
-    child.wait().unwrap();
+    stop(&mut child);
 
     let mut child = spawn(&dir, addr);
     let start = Instant::now();
@@ -146,29 +189,14 @@ fn kill_9_and_restart_finishes_every_job() {
     let _ = std::fs::remove_dir_all(&dir);
 }
 
-/// SIGTERM (what a service manager sends) stops the server gracefully: it
-/// exits 0 instead of dying of the signal.
+/// SIGTERM (what a service manager sends) stops an idle server
+/// gracefully: it exits 0 instead of dying of the signal.
 #[test]
 #[cfg(unix)]
 fn sigterm_stops_the_server_gracefully() {
     let (dir, addr) = fresh("sigterm");
     let mut child = spawn(&dir, addr);
-    let sent = Command::new("kill")
-        .args(["-TERM", &child.id().to_string()])
-        .status()
-        .expect("run kill");
-    assert!(sent.success());
-    let start = Instant::now();
-    let status = loop {
-        if let Some(status) = child.try_wait().unwrap() {
-            break status;
-        }
-        if start.elapsed() > Duration::from_secs(20) {
-            child.kill().unwrap();
-            panic!("the server did not stop within 20 s of SIGTERM");
-        }
-        std::thread::sleep(Duration::from_millis(50));
-    };
+    let status = terminate(&mut child);
     assert_eq!(status.code(), Some(0), "{status:?}");
     let _ = std::fs::remove_dir_all(&dir);
 }
