@@ -1,14 +1,18 @@
-//! Status-route latency under load while a job runs (loopback only, bounded
-//! in count and time):
+//! Status-route latency under load while jobs run and uploads are refused
+//! (loopback only, bounded in count and time):
 //!
 //! ```sh
 //! cargo run --release -p server --example load [-- RATE SECONDS]
 //! ```
 //!
-//! Starts the service on 127.0.0.1 with a temporary data directory, submits
-//! the full-scale generated city with the reference job (a run of about 20 s
-//! on 2 cores), then sends `RATE` (default 200) `GET /v1/jobs/{id}` requests
-//! per second for `SECONDS` (default 10) and prints the latency percentiles.
+//! Starts the service on 127.0.0.1 with a temporary data directory, two
+//! workers and room for one waiting job, submits the full-scale generated
+//! city with the reference job three times (two run, one waits: the queue
+//! is full), then for `SECONDS` (default 10) sends `RATE` (default 200)
+//! `GET /v1/jobs/{id}` requests per second and 20 uploads of the city's
+//! summary (each refused with 429), and prints the status latency
+//! percentiles, the uploads' answers and the process's peak resident memory
+//! over the window.
 
 use std::time::{Duration, Instant};
 
@@ -34,7 +38,10 @@ async fn main() -> std::io::Result<()> {
         .clamp(1, 60);
     let dir = std::env::temp_dir().join(format!("impostor-load-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&dir);
-    let state = AppState::open(Config::new(&dir))?;
+    let mut cfg = Config::new(&dir);
+    cfg.workers = 2;
+    cfg.max_queue = 1;
+    let state = AppState::open(cfg)?;
     let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await?;
     let addr = listener.local_addr()?;
     tokio::spawn(run(listener, state, std::future::pending()));
@@ -53,20 +60,60 @@ async fn main() -> std::io::Result<()> {
         "/../fixtures/jobs/vienna-reference.json"
     ))?)?;
     let body = json!({"scene": serde_json::to_value(scene.summary())?, "job": job}).to_string();
-    let (status, b) = request(
-        addr,
-        "POST",
-        "/v1/jobs",
-        Some("application/json"),
-        body.as_bytes(),
-    )
-    .await?;
-    assert_eq!(status, 202, "{}", String::from_utf8_lossy(&b));
-    let id = serde_json::from_slice::<Value>(&b)?["id"]
-        .as_str()
-        .ok_or_else(|| std::io::Error::other("the answer has no job id"))?
-        .to_string();
-    let path = format!("/v1/jobs/{id}");
+    let mut ids = Vec::new();
+    for _ in 0..3 {
+        let (status, b) = request(
+            addr,
+            "POST",
+            "/v1/jobs",
+            Some("application/json"),
+            body.as_bytes(),
+        )
+        .await?;
+        assert_eq!(status, 202, "{}", String::from_utf8_lossy(&b));
+        ids.push(
+            serde_json::from_slice::<Value>(&b)?["id"]
+                .as_str()
+                .ok_or_else(|| std::io::Error::other("the answer has no job id"))?
+                .to_string(),
+        );
+        // Let a worker take it, so that the third one waits.
+        tokio::time::sleep(Duration::from_millis(300)).await;
+    }
+    let path = format!("/v1/jobs/{}", ids[0]);
+
+    // 20 uploads over the window, each refused while the queue is full.
+    let body = std::sync::Arc::new(body);
+    let uploads: Vec<_> = (0..20u64)
+        .map(|k| {
+            let body = body.clone();
+            tokio::spawn(async move {
+                tokio::time::sleep(Duration::from_millis(k * seconds * 1000 / 20)).await;
+                let r = request(
+                    addr,
+                    "POST",
+                    "/v1/jobs",
+                    Some("application/json"),
+                    body.as_bytes(),
+                )
+                .await;
+                r.map(|(s, _)| s).unwrap_or(0)
+            })
+        })
+        .collect();
+    // The process's resident memory, sampled over the window.
+    let sampling = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(true));
+    let sampler = {
+        let sampling = sampling.clone();
+        tokio::spawn(async move {
+            let mut peak = 0u64;
+            while sampling.load(std::sync::atomic::Ordering::Relaxed) {
+                peak = peak.max(optimizer::place::current_rss_bytes());
+                tokio::time::sleep(Duration::from_millis(100)).await;
+            }
+            peak
+        })
+    };
 
     let mut tick = tokio::time::interval(Duration::from_micros(1_000_000 / rate));
     let mut tasks = Vec::new();
@@ -90,6 +137,16 @@ async fn main() -> std::io::Result<()> {
         lat.push(d.as_secs_f64() * 1e3);
     }
     let elapsed = start.elapsed().as_secs_f64();
+    let mut refused = 0;
+    let mut other = Vec::new();
+    for u in uploads {
+        match u.await.map_err(std::io::Error::other)? {
+            429 => refused += 1,
+            s => other.push(s),
+        }
+    }
+    sampling.store(false, std::sync::atomic::Ordering::Relaxed);
+    let peak = sampler.await.map_err(std::io::Error::other)?;
     lat.sort_by(f64::total_cmp);
     let pct = |p: f64| lat[((lat.len() - 1) as f64 * p).round() as usize];
     let (_, b) = request(addr, "GET", &path, None, b"").await?;
@@ -105,7 +162,19 @@ async fn main() -> std::io::Result<()> {
         v["stage"],
         v["progress"].as_f64().unwrap_or(0.0) * 100.0
     );
-    let _ = request(addr, "DELETE", &path, None, b"").await;
+    println!(
+        "uploads ({} bytes each): {refused} of 20 refused with 429{}; peak resident memory {:.0} MB",
+        body.len(),
+        if other.is_empty() {
+            String::new()
+        } else {
+            format!(", others answered {other:?}")
+        },
+        peak as f64 / 1e6
+    );
+    for id in &ids {
+        let _ = request(addr, "DELETE", &format!("/v1/jobs/{id}"), None, b"").await;
+    }
     let _ = std::fs::remove_dir_all(&dir);
     Ok(())
 }
