@@ -9,6 +9,18 @@ use server::{AppState, Config, run};
 
 mod common;
 
+/// The full-scale reference job (several seconds on the full city).
+fn reference_job() -> Value {
+    serde_json::from_slice(
+        &std::fs::read(concat!(
+            env!("CARGO_MANIFEST_DIR"),
+            "/../fixtures/jobs/vienna-reference.json"
+        ))
+        .unwrap(),
+    )
+    .unwrap()
+}
+
 fn job_json() -> Vec<u8> {
     std::fs::read(concat!(
         env!("CARGO_MANIFEST_DIR"),
@@ -68,6 +80,28 @@ async fn submit_json(addr: SocketAddr, body: &Value) -> (u16, Vec<u8>) {
 async fn get_json(addr: SocketAddr, path: &str) -> (u16, Value) {
     let (s, b) = request(addr, "GET", path, None, b"").await;
     (s, serde_json::from_slice(&b).unwrap_or(Value::Null))
+}
+
+/// The scene summary of the generated city at `scale`.
+fn city_summary(scale: f64) -> Value {
+    serde_json::to_value(
+        optimizer::scene::gltf_load::load_scene_bytes(&city(scale), "c")
+            .unwrap()
+            .summary(),
+    )
+    .unwrap()
+}
+
+/// Submits `job` over the generated city's summary at `scale`; asserts it
+/// is accepted and returns its id.
+async fn submit_city(addr: SocketAddr, scale: f64, job: Value) -> String {
+    let body = json!({"scene": city_summary(scale), "job": job});
+    let (s, b) = submit_json(addr, &body).await;
+    assert_eq!(s, 202, "{}", String::from_utf8_lossy(&b));
+    serde_json::from_slice::<Value>(&b).unwrap()["id"]
+        .as_str()
+        .unwrap()
+        .to_string()
 }
 
 fn multipart(parts: &[(&str, &[u8])]) -> (String, Vec<u8>) {
@@ -291,21 +325,7 @@ async fn full_queue_and_cancellation() {
 
     // A long job (the full city's reference) is cancelled promptly.
     let addr = start(Config::new(temp_dir("cancel"))).await;
-    let summary = serde_json::to_value(
-        optimizer::scene::gltf_load::load_scene_bytes(&city(1.0), "c")
-            .unwrap()
-            .summary(),
-    )
-    .unwrap();
-    let job: Value = serde_json::from_slice(
-        &std::fs::read(concat!(
-            env!("CARGO_MANIFEST_DIR"),
-            "/../fixtures/jobs/vienna-reference.json"
-        ))
-        .unwrap(),
-    )
-    .unwrap();
-    let body = json!({"scene": summary, "job": job});
+    let body = json!({"scene": city_summary(1.0), "job": reference_job()});
     let (s, b) = submit_json(addr, &body).await;
     assert_eq!(s, 202, "{}", String::from_utf8_lossy(&b));
     let id = serde_json::from_slice::<Value>(&b).unwrap()["id"]
@@ -351,20 +371,7 @@ async fn finished_jobs_are_removed_after_the_retention() {
     let mut cfg = Config::new(&dir);
     cfg.retain_days = Some(4.0 / 86_400.0);
     let addr = start(cfg).await;
-    let summary = serde_json::to_value(
-        optimizer::scene::gltf_load::load_scene_bytes(&city(0.1), "c")
-            .unwrap()
-            .summary(),
-    )
-    .unwrap();
-    let body =
-        json!({"scene": summary, "job": serde_json::from_slice::<Value>(&job_json()).unwrap()});
-    let (s, b) = submit_json(addr, &body).await;
-    assert_eq!(s, 202, "{}", String::from_utf8_lossy(&b));
-    let id = serde_json::from_slice::<Value>(&b).unwrap()["id"]
-        .as_str()
-        .unwrap()
-        .to_string();
+    let id = submit_city(addr, 0.1, serde_json::from_slice(&job_json()).unwrap()).await;
     let v = wait_final(addr, &id, Duration::from_secs(120)).await;
     assert_eq!(v["state"], "succeeded", "{v}");
     let finished = Instant::now();
@@ -401,20 +408,7 @@ async fn the_event_stream_follows_a_job_to_its_final_state() {
     let addr = start(Config::new(temp_dir("events"))).await;
     let (s, _) = get_json(addr, "/v1/jobs/0b5e6a1c-3f1d-4c55-9a57-2f0e8f3f6d21/events").await;
     assert_eq!(s, 404);
-    let summary = serde_json::to_value(
-        optimizer::scene::gltf_load::load_scene_bytes(&city(0.1), "c")
-            .unwrap()
-            .summary(),
-    )
-    .unwrap();
-    let body =
-        json!({"scene": summary, "job": serde_json::from_slice::<Value>(&job_json()).unwrap()});
-    let (s, b) = submit_json(addr, &body).await;
-    assert_eq!(s, 202, "{}", String::from_utf8_lossy(&b));
-    let id = serde_json::from_slice::<Value>(&b).unwrap()["id"]
-        .as_str()
-        .unwrap()
-        .to_string();
+    let id = submit_city(addr, 0.1, serde_json::from_slice(&job_json()).unwrap()).await;
     // The stream ends by itself after the final state (the request helper
     // reads to the end of the answer).
     let (s, raw) = tokio::time::timeout(
@@ -537,37 +531,13 @@ async fn admission_is_decided_before_the_body_is_read() {
 /// `--job-max-memory` fails naming that limit, before allocating it.
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn jobs_over_the_per_job_limits_fail_naming_them() {
-    let summary = |scale| {
-        serde_json::to_value(
-            optimizer::scene::gltf_load::load_scene_bytes(&city(scale), "c")
-                .unwrap()
-                .summary(),
-        )
-        .unwrap()
-    };
-    let submit = |addr, body: Value| async move {
-        let (s, b) = submit_json(addr, &body).await;
-        assert_eq!(s, 202, "{}", String::from_utf8_lossy(&b));
-        serde_json::from_slice::<Value>(&b).unwrap()["id"]
-            .as_str()
-            .unwrap()
-            .to_string()
-    };
-
     // The full city's reference job places for several seconds.
     let mut cfg = Config::new(temp_dir("time-limit"));
     cfg.job_max_seconds = Some(1);
     let addr = start(cfg).await;
-    let job: Value = serde_json::from_slice(
-        &std::fs::read(concat!(
-            env!("CARGO_MANIFEST_DIR"),
-            "/../fixtures/jobs/vienna-reference.json"
-        ))
-        .unwrap(),
-    )
-    .unwrap();
+    let job = reference_job();
     let begin = Instant::now();
-    let id = submit(addr, json!({"scene": summary(1.0), "job": job})).await;
+    let id = submit_city(addr, 1.0, job).await;
     let v = wait_final(addr, &id, Duration::from_secs(60)).await;
     assert_eq!(v["state"], "failed", "{v}");
     assert_eq!(
@@ -588,7 +558,7 @@ async fn jobs_over_the_per_job_limits_fail_naming_them() {
     cfg.job_max_memory_bytes = Some(1000);
     let addr = start(cfg).await;
     let job: Value = serde_json::from_slice(&job_json()).unwrap();
-    let id = submit(addr, json!({"scene": summary(0.1), "job": job})).await;
+    let id = submit_city(addr, 0.1, job).await;
     let v = wait_final(addr, &id, Duration::from_secs(60)).await;
     assert_eq!(v["state"], "failed", "{v}");
     let error = v["error"].as_str().unwrap();
