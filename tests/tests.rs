@@ -6,6 +6,7 @@ mod bad_input;
 mod bake;
 mod cli;
 mod corpus;
+mod fuzz;
 mod golden;
 mod real_scenes;
 mod report;
