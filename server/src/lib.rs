@@ -170,16 +170,26 @@ async fn admit(State(st): State<AppState>, req: Request, next: Next) -> Response
             )
             .into_response();
         }
-        let max_queue = st.0.cfg.max_queue;
-        if st.0.queue.waiting() >= max_queue {
-            return ApiError::new(
-                StatusCode::TOO_MANY_REQUESTS,
-                format!("the queue is full ({max_queue} jobs waiting)"),
-            )
-            .into_response();
+        if let Err(e) = st.check_queue() {
+            return e.into_response();
         }
     }
     next.run(req).await
+}
+
+impl AppState {
+    /// 429 when the queue is full: checked from a submission's headers and
+    /// again once it is parsed (jobs may have arrived meanwhile).
+    pub(crate) fn check_queue(&self) -> Result<(), ApiError> {
+        let max_queue = self.0.cfg.max_queue;
+        if self.0.queue.waiting() >= max_queue {
+            return Err(ApiError::new(
+                StatusCode::TOO_MANY_REQUESTS,
+                format!("the queue is full ({max_queue} jobs waiting)"),
+            ));
+        }
+        Ok(())
+    }
 }
 
 /// The router of the service.

@@ -222,17 +222,6 @@ impl Store {
         Ok((id, uid))
     }
 
-    /// The internal id of the job whose public id is `uid`; `Ok(None)` when
-    /// there is none.
-    pub fn lookup(&self, uid: &str) -> io::Result<Option<i64>> {
-        let db = self.db()?;
-        match db.query_row("SELECT id FROM jobs WHERE uid = ?1", [uid], |r| r.get(0)) {
-            Ok(id) => Ok(Some(id)),
-            Err(rusqlite::Error::QueryReturnedNoRows) => Ok(None),
-            Err(e) => Err(db_err(e)),
-        }
-    }
-
     /// Records a job's new state, with its error or summary when given;
     /// stamps the start time on `running` and the finish time on a final
     /// state. A failure is logged: the job then keeps its previous row.
@@ -376,19 +365,19 @@ mod tests {
             uuid::Uuid::parse_str(&old).unwrap().get_version(),
             Some(uuid::Version::Random)
         );
-        assert_eq!(store.lookup(&old).unwrap(), Some(1));
-        assert_eq!(store.lookup("1").unwrap(), None);
+        assert_eq!(store.find(&old).unwrap().map(|r| r.id), Some(1));
+        assert_eq!(store.find("1").unwrap().map(|r| r.id), None);
         let (a, ua) = store.create(b"{}", b"{}", None, false).unwrap();
         let (b, ub) = store.create(b"{}", b"{}", None, false).unwrap();
         assert_eq!((a, b), (2, 3));
         assert!(ua != ub && ua != old);
-        assert_eq!(store.lookup(&ub).unwrap(), Some(3));
+        assert_eq!(store.find(&ub).unwrap().map(|r| r.id), Some(3));
         assert_eq!(store.row(2).unwrap().unwrap().uid, ua);
         // Reopening keeps every id.
         drop(store);
         let store = Store::open(&dir).unwrap();
-        assert_eq!(store.lookup(&old).unwrap(), Some(1));
-        assert_eq!(store.lookup(&ua).unwrap(), Some(2));
+        assert_eq!(store.find(&old).unwrap().map(|r| r.id), Some(1));
+        assert_eq!(store.find(&ua).unwrap().map(|r| r.id), Some(2));
         let _ = std::fs::remove_dir_all(&dir);
     }
 }

@@ -39,13 +39,7 @@ pub(crate) async fn submit(
 /// Checks, stores and queues a submission. Returns the new job's public id.
 fn accept(st: &AppState, sub: Submission) -> Result<String, ApiError> {
     check_submission(&sub.scene, &sub.job, sub.pvs.as_deref(), sub.bake)?;
-    let max_queue = st.0.cfg.max_queue;
-    if st.0.queue.waiting() >= max_queue {
-        return Err(ApiError::new(
-            StatusCode::TOO_MANY_REQUESTS,
-            format!("the queue is full ({max_queue} jobs waiting)"),
-        ));
-    }
+    st.check_queue()?;
     let (id, uid) =
         st.0.store
             .create(&sub.scene, &sub.job, sub.pvs.as_deref(), sub.bake)
@@ -150,7 +144,7 @@ fn list_page(st: &AppState, q: ListQuery) -> Result<JobList, ApiError> {
         None => 0,
         Some(uid) => {
             st.0.store
-                .lookup(uid)
+                .find(uid)
                 .map_err(ApiError::internal)?
                 .ok_or_else(|| {
                     ApiError::new(
@@ -158,6 +152,7 @@ fn list_page(st: &AppState, q: ListQuery) -> Result<JobList, ApiError> {
                         format!("after: no job {uid} (a job's id, as in next_after)"),
                     )
                 })?
+                .id
         }
     };
     let ids =
@@ -230,13 +225,10 @@ pub(crate) async fn events(
                 return None;
             }
             loop {
-                let now = {
-                    let st = st.clone();
-                    tokio::task::spawn_blocking(move || job_event(&st, id))
-                        .await
-                        .ok()
-                        .flatten()?
-                };
+                let now = blocking(&st, move |st| Ok(job_event(st, id)))
+                    .await
+                    .ok()
+                    .flatten()?;
                 if last.as_ref() != Some(&now) {
                     let event = Event::default().event("status").json_data(&now);
                     let done = now.state.is_final();
