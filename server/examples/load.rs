@@ -5,7 +5,8 @@
 //! cargo run --release -p server --example load [-- RATE SECONDS]
 //! ```
 //!
-//! Starts the service on 127.0.0.1 with a temporary data directory, two
+//! Starts the service on 127.0.0.1 with a tokens file (every request
+//! carries a token), a temporary data directory, two
 //! workers and room for one waiting job, submits the full-scale generated
 //! city with the reference job three times (two run, one waits: the queue
 //! is full), then for `SECONDS` (default 10) sends `RATE` (default 200)
@@ -20,8 +21,28 @@ use serde_json::{Value, json};
 use server::{AppState, Config, run};
 
 #[path = "../tests/common/client.rs"]
+#[allow(dead_code)] // the example sends every request with its token
 mod client;
-use client::request;
+
+/// The API token every request carries (the service runs with tokens).
+static TOKEN: std::sync::OnceLock<String> = std::sync::OnceLock::new();
+
+/// One request with the token; status and body.
+async fn request(
+    addr: std::net::SocketAddr,
+    method: &str,
+    path: &str,
+    ctype: Option<&str>,
+    body: &[u8],
+) -> std::io::Result<(u16, Vec<u8>)> {
+    let auth = format!("Bearer {}", TOKEN.get().map_or("", String::as_str));
+    let headers = [("Authorization", auth.as_str())];
+    Ok(
+        client::request_with(addr, method, path, &headers, ctype, body)
+            .await?
+            .0,
+    )
+}
 
 #[tokio::main(flavor = "multi_thread", worker_threads = 2)]
 async fn main() -> std::io::Result<()> {
@@ -38,7 +59,10 @@ async fn main() -> std::io::Result<()> {
         .clamp(1, 60);
     let dir = std::env::temp_dir().join(format!("impostor-load-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&dir);
+    let tokens = std::env::temp_dir().join(format!("impostor-load-{}.json", std::process::id()));
+    let _ = TOKEN.set(server::auth::add(&tokens, "load")?);
     let mut cfg = Config::new(&dir);
+    cfg.tokens = Some(tokens.clone());
     cfg.workers = 2;
     cfg.max_queue = 1;
     let state = AppState::open(cfg)?;
@@ -176,5 +200,6 @@ async fn main() -> std::io::Result<()> {
         let _ = request(addr, "DELETE", &format!("/v1/jobs/{id}"), None, b"").await;
     }
     let _ = std::fs::remove_dir_all(&dir);
+    let _ = std::fs::remove_file(&tokens);
     Ok(())
 }

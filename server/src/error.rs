@@ -1,5 +1,5 @@
 //! Error answers: [`ApiError`] turns into a status with an `{"error": ...}`
-//! JSON body (and `Retry-After` on 429), and documents itself as the
+//! JSON body (with `Retry-After` on 429 and `WWW-Authenticate` on 401), and documents itself as the
 //! `ErrorBody` schema in the OpenAPI document.
 
 use aide::generate::GenContext;
@@ -13,7 +13,13 @@ use crate::api::types::ErrorBody;
 /// An error answer: status, a JSON `{"error": ...}` body and, for an
 /// internal error, the request id its details were logged under.
 #[derive(Debug)]
-pub struct ApiError(StatusCode, String, Option<String>);
+pub struct ApiError {
+    status: StatusCode,
+    message: String,
+    request_id: Option<String>,
+    /// Seconds a client should wait before trying again (429).
+    retry_after: u64,
+}
 
 /// A new id to log an internal error under: 16 random hex digits.
 pub(crate) fn new_request_id() -> String {
@@ -25,7 +31,20 @@ pub(crate) fn new_request_id() -> String {
 impl ApiError {
     /// An error with `status` and the message `msg`.
     pub(crate) fn new(status: StatusCode, msg: impl Into<String>) -> Self {
-        ApiError(status, msg.into(), None)
+        ApiError {
+            status,
+            message: msg.into(),
+            request_id: None,
+            retry_after: 5,
+        }
+    }
+
+    /// A 429 answer telling the client to wait `seconds` (at least 1).
+    pub(crate) fn too_many(msg: impl Into<String>, seconds: u64) -> Self {
+        ApiError {
+            retry_after: seconds.max(1),
+            ..ApiError::new(StatusCode::TOO_MANY_REQUESTS, msg)
+        }
     }
 
     /// A 500 answer for a failure that is not the client's: its details
@@ -34,11 +53,13 @@ impl ApiError {
     pub(crate) fn internal(e: impl std::fmt::Display) -> Self {
         let id = new_request_id();
         tracing::error!(request_id = id, "internal error: {e}");
-        ApiError(
-            StatusCode::INTERNAL_SERVER_ERROR,
-            format!("internal error (request {id}; the server's log has the details)"),
-            Some(id),
-        )
+        ApiError {
+            request_id: Some(id.clone()),
+            ..ApiError::new(
+                StatusCode::INTERNAL_SERVER_ERROR,
+                format!("internal error (request {id}; the server's log has the details)"),
+            )
+        }
     }
 
     /// A 404 answer for an id without a job.
@@ -50,14 +71,19 @@ impl ApiError {
 impl IntoResponse for ApiError {
     fn into_response(self) -> axum::response::Response {
         let body = ErrorBody {
-            error: self.1,
-            request_id: self.2,
+            error: self.message,
+            request_id: self.request_id,
         };
-        let mut r = (self.0, axum::Json(body)).into_response();
-        // A full queue drains as jobs finish: tell clients when to try again.
-        if self.0 == StatusCode::TOO_MANY_REQUESTS {
+        let mut r = (self.status, axum::Json(body)).into_response();
+        // A full queue drains as jobs finish, a rate limit refills: tell
+        // clients when to try again.
+        if self.status == StatusCode::TOO_MANY_REQUESTS {
             r.headers_mut()
-                .insert(header::RETRY_AFTER, HeaderValue::from_static("5"));
+                .insert(header::RETRY_AFTER, HeaderValue::from(self.retry_after));
+        }
+        if self.status == StatusCode::UNAUTHORIZED {
+            r.headers_mut()
+                .insert(header::WWW_AUTHENTICATE, HeaderValue::from_static("Bearer"));
         }
         r
     }

@@ -29,6 +29,7 @@ use axum::middleware::{self, Next};
 use axum::response::{IntoResponse, Response};
 
 mod api;
+pub mod auth;
 mod error;
 mod job;
 mod pipeline;
@@ -46,7 +47,8 @@ pub const OPTIMIZER_VERSION: &str = optimizer::VERSION;
 pub struct Config {
     /// Where the database and the job files live.
     pub data_dir: PathBuf,
-    /// Worker threads (jobs run one per worker).
+    /// Worker threads (jobs run one per worker; none: jobs are accepted
+    /// and queued but not run).
     pub workers: usize,
     /// Largest request body, MiB.
     pub max_upload_mb: usize,
@@ -64,6 +66,16 @@ pub struct Config {
     /// How long a finished job (succeeded, failed or cancelled) and its
     /// files are kept, days (`--retain-days`; default: for ever).
     pub retain_days: Option<f64>,
+    /// The tokens file (`--tokens`): every `/v1` request then needs a
+    /// token of it, and sees only its tenant's jobs. `None`: no
+    /// authentication, one tenant (`--no-auth`, loopback only).
+    pub tokens: Option<PathBuf>,
+    /// The most jobs a tenant may have queued or running at once
+    /// (`--tenant-max-jobs`; default: no limit but the queue's).
+    pub tenant_max_jobs: Option<usize>,
+    /// The most `/v1` requests per second a tenant may make, in bursts of
+    /// as many (`--rate-limit`; default: no limit).
+    pub rate_limit: Option<u32>,
 }
 
 impl Config {
@@ -78,6 +90,9 @@ impl Config {
             job_max_seconds: None,
             job_max_memory_bytes: None,
             retain_days: None,
+            tokens: None,
+            tenant_max_jobs: None,
+            rate_limit: None,
         }
     }
 }
@@ -87,6 +102,8 @@ struct Inner {
     store: store::Store,
     queue: worker::Queue,
     live: worker::LiveJobs,
+    tokens: Option<auth::Tokens>,
+    limiter: Option<governor::DefaultKeyedRateLimiter<String>>,
 }
 
 /// Shared state of the service: configuration, job store, queue and the
@@ -98,6 +115,11 @@ impl AppState {
     /// Opens (or creates) the data directory and its database, re-queues the
     /// jobs a previous process left unfinished and starts the workers.
     pub fn open(cfg: Config) -> std::io::Result<AppState> {
+        let tokens = cfg.tokens.as_deref().map(auth::Tokens::open).transpose()?;
+        let limiter = cfg
+            .rate_limit
+            .and_then(std::num::NonZeroU32::new)
+            .map(|n| governor::RateLimiter::keyed(governor::Quota::per_second(n)));
         let store = store::Store::open(&cfg.data_dir)?;
         let pending = store.recover()?;
         let (queue, rx) = worker::Queue::new();
@@ -107,6 +129,8 @@ impl AppState {
             store,
             queue,
             live: worker::LiveJobs::default(),
+            tokens,
+            limiter,
         }));
         for id in pending {
             state.0.queue.push(id);
@@ -148,13 +172,54 @@ fn spawn_retention(state: &AppState, days: f64) -> std::io::Result<()> {
     Ok(())
 }
 
-/// Admission from the headers alone: a submission while the queue is
-/// full is answered 429, one whose `Content-Length` is over the upload
-/// limit 413, before any of its body is read, so a large upload costs the
-/// server nothing (the handler checks the queue again once it has parsed
-/// the submission, as jobs may have arrived meanwhile, and the body limit
-/// still holds for a body sent without a length).
-async fn admit(State(st): State<AppState>, req: Request, next: Next) -> Response {
+/// Who makes a request: with a tokens file, the tenant of its token;
+/// without (`--no-auth`), anyone, who sees every job.
+#[derive(Clone, Debug)]
+pub(crate) enum Access {
+    All,
+    Tenant(String),
+}
+
+impl Access {
+    /// The tenant whose jobs the request may see; `None`: all jobs.
+    pub fn tenant(&self) -> Option<&str> {
+        match self {
+            Access::All => None,
+            Access::Tenant(t) => Some(t),
+        }
+    }
+}
+
+/// Every `/v1` request passes here, and is decided from its headers alone,
+/// before any of its body is read: 401 without a valid token, 429 over the
+/// tenant's rate limit; a submission 413 when its `Content-Length` is over
+/// the upload limit, 429 when the queue is full or the tenant has its
+/// most jobs. So a large upload that will be refused costs the server
+/// nothing (the handler checks the queue and the quota again once it has
+/// parsed the submission, as jobs may have arrived meanwhile, and the body
+/// limit still holds for a body sent without a length). The request goes
+/// on with its [`Access`].
+async fn guard(State(st): State<AppState>, mut req: Request, next: Next) -> Response {
+    if !req.uri().path().starts_with("/v1/") {
+        return next.run(req).await;
+    }
+    let access = match st.authenticate(req.headers()) {
+        Ok(a) => a,
+        Err(e) => return e.into_response(),
+    };
+    if let Some(limiter) = &st.0.limiter {
+        let key = access.tenant().unwrap_or("").to_string();
+        if let Err(not_until) = limiter.check_key(&key) {
+            use governor::clock::Clock;
+            let wait = not_until.wait_time_from(limiter.clock().now());
+            let per_s = st.0.cfg.rate_limit.unwrap_or(0);
+            return ApiError::too_many(
+                format!("more than {per_s} requests per second (the server's --rate-limit)"),
+                wait.as_secs_f64().ceil() as u64,
+            )
+            .into_response();
+        }
+    }
     if req.method() == Method::POST && req.uri().path() == "/v1/jobs" {
         let max_mb = st.0.cfg.max_upload_mb;
         let length = req
@@ -173,11 +238,45 @@ async fn admit(State(st): State<AppState>, req: Request, next: Next) -> Response
         if let Err(e) = st.check_queue() {
             return e.into_response();
         }
+        let (st2, access2) = (st.clone(), access.clone());
+        let quota = tokio::task::spawn_blocking(move || st2.check_quota(&access2)).await;
+        match quota {
+            Ok(Ok(())) => {}
+            Ok(Err(e)) => return e.into_response(),
+            Err(e) => return ApiError::internal(e).into_response(),
+        }
     }
+    req.extensions_mut().insert(access);
     next.run(req).await
 }
 
 impl AppState {
+    /// The [`Access`] of a request from its `Authorization` header: 401
+    /// without a token, or with one the tokens file does not list.
+    fn authenticate(&self, headers: &axum::http::HeaderMap) -> Result<Access, ApiError> {
+        let Some(tokens) = &self.0.tokens else {
+            return Ok(Access::All);
+        };
+        let unauthorized = |msg: &str| ApiError::new(StatusCode::UNAUTHORIZED, msg);
+        let value = headers
+            .get(axum::http::header::AUTHORIZATION)
+            .ok_or_else(|| {
+                unauthorized("this server needs an API token: send `Authorization: Bearer <token>`")
+            })?;
+        let token = value
+            .to_str()
+            .ok()
+            .and_then(|v| {
+                let (scheme, token) = v.split_once(' ')?;
+                scheme.eq_ignore_ascii_case("bearer").then(|| token.trim())
+            })
+            .ok_or_else(|| unauthorized("the Authorization header must be `Bearer <token>`"))?;
+        tokens
+            .tenant(token)
+            .map(Access::Tenant)
+            .ok_or_else(|| unauthorized("the token is not valid (unknown or revoked)"))
+    }
+
     /// 429 when the queue is full: checked from a submission's headers and
     /// again once it is parsed (jobs may have arrived meanwhile).
     pub(crate) fn check_queue(&self) -> Result<(), ApiError> {
@@ -190,13 +289,36 @@ impl AppState {
         }
         Ok(())
     }
+
+    /// 429 when the tenant of `access` has `--tenant-max-jobs` jobs queued
+    /// or running (blocking: a database read).
+    pub(crate) fn check_quota(&self, access: &Access) -> Result<(), ApiError> {
+        let (Some(max), Some(tenant)) = (self.0.cfg.tenant_max_jobs, access.tenant()) else {
+            return Ok(());
+        };
+        let active = self
+            .0
+            .store
+            .active_jobs(tenant)
+            .map_err(ApiError::internal)?;
+        if active >= max {
+            return Err(ApiError::new(
+                StatusCode::TOO_MANY_REQUESTS,
+                format!(
+                    "tenant {tenant} has {active} jobs queued or running, its most (the \
+                     server's --tenant-max-jobs)"
+                ),
+            ));
+        }
+        Ok(())
+    }
 }
 
 /// The router of the service.
 pub fn app(state: AppState) -> Router {
     let limit = state.0.cfg.max_upload_mb.saturating_mul(1024 * 1024);
     api::router()
-        .layer(middleware::from_fn_with_state(state.clone(), admit))
+        .layer(middleware::from_fn_with_state(state.clone(), guard))
         .layer(DefaultBodyLimit::max(limit))
         .layer(tower_http::timeout::TimeoutLayer::with_status_code(
             StatusCode::REQUEST_TIMEOUT,

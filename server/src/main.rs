@@ -2,14 +2,84 @@
 
 use std::io::IsTerminal;
 use std::path::PathBuf;
+use std::process::ExitCode;
 
-use clap::Parser;
-use server::{AppState, Config, run};
+use clap::{Args, Parser, Subcommand};
+use server::{AppState, Config, auth, run};
 
 /// HTTP service for impostor placement jobs.
+///
+/// Serving needs either `--tokens FILE` (every request then needs a token
+/// of that file, made with `impostor-server token add`) or `--no-auth`
+/// with a loopback `--listen`.
 #[derive(Parser)]
-#[command(name = "impostor-server", version, about)]
+#[command(
+    name = "impostor-server",
+    version,
+    about,
+    args_conflicts_with_subcommands = true
+)]
 struct Cli {
+    #[command(subcommand)]
+    command: Option<Command>,
+    #[command(flatten)]
+    serve: Serve,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Manage the API tokens of a tokens file.
+    #[command(subcommand)]
+    Token(TokenCommand),
+}
+
+#[derive(Subcommand)]
+enum TokenCommand {
+    /// Create a token for a tenant and print it (and nothing else) on
+    /// stdout: the only time it is shown. The file keeps its SHA-256.
+    Add {
+        /// The tokens file (created, readable by its owner only, when missing).
+        #[arg(long, value_name = "FILE")]
+        tokens: PathBuf,
+        /// The tenant the token acts for (letters, digits, '.', '_', '-').
+        #[arg(long)]
+        tenant: String,
+    },
+    /// List the tokens: id, tenant, creation time (never a token).
+    List {
+        /// The tokens file.
+        #[arg(long, value_name = "FILE")]
+        tokens: PathBuf,
+    },
+    /// Revoke a token by its id (as `token list` shows it); a running
+    /// server refuses it within a second.
+    Revoke {
+        /// The tokens file.
+        #[arg(long, value_name = "FILE")]
+        tokens: PathBuf,
+        /// The token's id.
+        id: String,
+    },
+}
+
+#[derive(Args)]
+struct Serve {
+    /// The tokens file: every /v1 request needs `Authorization: Bearer
+    /// <token>` with a token of it, and sees its tenant's jobs only.
+    #[arg(long, value_name = "FILE")]
+    tokens: Option<PathBuf>,
+    /// No authentication: anyone who reaches the port sees, submits and
+    /// deletes every job. Only with a loopback --listen.
+    #[arg(long, conflicts_with = "tokens")]
+    no_auth: bool,
+    /// The most jobs one tenant may have queued or running (default: no
+    /// limit but --max-queue); more are answered 429 before the upload.
+    #[arg(long, value_name = "N", value_parser = clap::value_parser!(u64).range(1..))]
+    tenant_max_jobs: Option<u64>,
+    /// The most /v1 requests per second one tenant may make, in bursts of
+    /// as many; more are answered 429 with Retry-After (default: no limit).
+    #[arg(long, value_name = "PER_SECOND", value_parser = clap::value_parser!(u32).range(1..))]
+    rate_limit: Option<u32>,
     /// Address to listen on.
     #[arg(long, default_value = "127.0.0.1:8080")]
     listen: String,
@@ -56,8 +126,52 @@ fn parse_gb(s: &str) -> Result<u64, String> {
     }
 }
 
-#[tokio::main]
-async fn main() -> std::io::Result<()> {
+fn main() -> ExitCode {
+    let cli = Cli::parse();
+    match cli.command {
+        Some(Command::Token(cmd)) => token(cmd),
+        None => serve(cli.serve),
+    }
+}
+
+/// `impostor-server token …`: exit 0, or 2 with the error on stderr.
+fn token(cmd: TokenCommand) -> ExitCode {
+    let result = match cmd {
+        TokenCommand::Add { tokens, tenant } => {
+            auth::add(&tokens, &tenant).map(|token| println!("{token}"))
+        }
+        TokenCommand::List { tokens } => auth::list(&tokens).map(|entries| {
+            println!("{:<10} {:<24} created (UTC, ms since 1970)", "id", "tenant");
+            for t in entries {
+                println!("{:<10} {:<24} {}", t.id, t.tenant, t.created_ms);
+            }
+        }),
+        TokenCommand::Revoke { tokens, id } => auth::revoke(&tokens, &id)
+            .map(|t| eprintln!("revoked token {} of tenant {}", t.id, t.tenant)),
+    };
+    match result {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("error: {e}");
+            ExitCode::from(2)
+        }
+    }
+}
+
+/// Serves until SIGINT or SIGTERM: exit 0; 2 for a bad configuration, 1
+/// when the server cannot start or fails.
+fn serve(cli: Serve) -> ExitCode {
+    let runtime = match tokio::runtime::Runtime::new() {
+        Ok(r) => r,
+        Err(e) => {
+            eprintln!("error: cannot start the runtime: {e}");
+            return ExitCode::FAILURE;
+        }
+    };
+    runtime.block_on(serve_async(cli))
+}
+
+async fn serve_async(cli: Serve) -> ExitCode {
     tracing_subscriber::fmt()
         .with_env_filter(
             tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| "info".into()),
@@ -65,7 +179,13 @@ async fn main() -> std::io::Result<()> {
         .with_writer(std::io::stderr)
         .with_ansi(std::io::stderr().is_terminal())
         .init();
-    let cli = Cli::parse();
+    if cli.tokens.is_none() && !cli.no_auth {
+        eprintln!(
+            "error: give --tokens FILE (create one with `impostor-server token add --tokens \
+             FILE --tenant NAME`), or --no-auth with a loopback --listen for local use"
+        );
+        return ExitCode::from(2);
+    }
     let mut cfg = Config::new(cli.data_dir);
     cfg.workers = cli.workers.max(1);
     cfg.max_upload_mb = cli.max_upload_mb.max(1);
@@ -73,10 +193,51 @@ async fn main() -> std::io::Result<()> {
     cfg.job_max_seconds = cli.job_max_seconds;
     cfg.job_max_memory_bytes = cli.job_max_memory;
     cfg.retain_days = cli.retain_days;
-    let state = AppState::open(cfg)?;
-    let listener = tokio::net::TcpListener::bind(&cli.listen).await?;
-    tracing::info!("listening on {}", listener.local_addr()?);
-    run(listener, state, shutdown_signal()).await
+    cfg.tokens = cli.tokens;
+    cfg.tenant_max_jobs = cli.tenant_max_jobs.map(|n| n as usize);
+    cfg.rate_limit = cli.rate_limit;
+    let listener = match tokio::net::TcpListener::bind(&cli.listen).await {
+        Ok(l) => l,
+        Err(e) => {
+            eprintln!("error: cannot listen on {}: {e}", cli.listen);
+            return ExitCode::FAILURE;
+        }
+    };
+    let addr = match listener.local_addr() {
+        Ok(a) => a,
+        Err(e) => {
+            eprintln!("error: {e}");
+            return ExitCode::FAILURE;
+        }
+    };
+    if cli.no_auth {
+        if !addr.ip().is_loopback() {
+            eprintln!(
+                "error: --no-auth serves every job to anyone who reaches the port: it needs a \
+                 loopback --listen (127.0.0.1 or [::1]), not {addr}; use --tokens FILE"
+            );
+            return ExitCode::from(2);
+        }
+        tracing::warn!(
+            "NO AUTHENTICATION (--no-auth): every process on this machine can see, submit and \
+             delete every job on {addr}"
+        );
+    }
+    let state = match AppState::open(cfg) {
+        Ok(s) => s,
+        Err(e) => {
+            eprintln!("error: {e}");
+            return ExitCode::from(2);
+        }
+    };
+    tracing::info!("listening on {addr}");
+    match run(listener, state, shutdown_signal()).await {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("error: {e}");
+            ExitCode::FAILURE
+        }
+    }
 }
 
 /// Completes on Ctrl-C (SIGINT) or SIGTERM, what service managers and

@@ -15,10 +15,50 @@ use rusqlite::Connection;
 
 use crate::job::JobState;
 
-/// The job database and the job directories under `<data_dir>/jobs/`.
+/// The job database and the job directories under `<data_dir>/jobs/`;
+/// uploads arrive in `<data_dir>/uploads/` (see [`Staged`]).
 pub(crate) struct Store {
     db: Mutex<Connection>,
     jobs_dir: PathBuf,
+    uploads_dir: PathBuf,
+}
+
+/// The names of a job's input files, in its staging folder and its job
+/// folder alike.
+pub(crate) const SCENE: &str = "scene";
+pub(crate) const JOB: &str = "job.json";
+pub(crate) const PVS: &str = "pvs.json";
+
+/// An upload being received: a folder of its own under `uploads/`, where
+/// the submission's parts are streamed as they arrive (the body is never
+/// held in memory), then moved into the job's folder by renaming when the
+/// job is accepted. Dropping it removes what is left, so a refused or
+/// broken upload leaves nothing behind; a crash's leftovers are removed on
+/// the next start.
+pub(crate) struct Staged {
+    dir: PathBuf,
+}
+
+impl Staged {
+    /// The path of input `name` ([`SCENE`], [`JOB`], [`PVS`]).
+    pub fn path(&self, name: &str) -> PathBuf {
+        self.dir.join(name)
+    }
+}
+
+impl Drop for Staged {
+    fn drop(&mut self) {
+        let dir = std::mem::take(&mut self.dir);
+        // Off the async runtime when dropped on it.
+        match tokio::runtime::Handle::try_current() {
+            Ok(rt) => {
+                rt.spawn_blocking(move || std::fs::remove_dir_all(dir));
+            }
+            Err(_) => {
+                let _ = std::fs::remove_dir_all(dir);
+            }
+        }
+    }
 }
 
 /// A new public job id: a random (version 4) UUID.
@@ -82,6 +122,8 @@ impl Store {
     pub fn open(data_dir: &Path) -> io::Result<Store> {
         let jobs_dir = data_dir.join("jobs");
         std::fs::create_dir_all(&jobs_dir)?;
+        let uploads_dir = data_dir.join("uploads");
+        std::fs::create_dir_all(&uploads_dir)?;
         let db = Connection::open(data_dir.join("jobs.sqlite")).map_err(db_err)?;
         db.execute_batch(
             "PRAGMA journal_mode = WAL;
@@ -124,9 +166,22 @@ impl Store {
         }
         db.execute_batch("CREATE UNIQUE INDEX IF NOT EXISTS jobs_uid ON jobs (uid)")
             .map_err(db_err)?;
+        // Tenants: the jobs of an older version, or of a server without
+        // tokens, have none (only a server without tokens shows them).
+        let has_tenant = db
+            .prepare("SELECT 1 FROM pragma_table_info('jobs') WHERE name = 'tenant'")
+            .and_then(|mut s| s.exists([]))
+            .map_err(db_err)?;
+        if !has_tenant {
+            db.execute_batch("ALTER TABLE jobs ADD COLUMN tenant TEXT")
+                .map_err(db_err)?;
+        }
+        db.execute_batch("CREATE INDEX IF NOT EXISTS jobs_tenant ON jobs (tenant, id)")
+            .map_err(db_err)?;
         Ok(Store {
             db: Mutex::new(db),
             jobs_dir,
+            uploads_dir,
         })
     }
 
@@ -159,6 +214,10 @@ impl Store {
         // Inputs are written before their row is committed: a directory
         // without a row belongs to a submission that was never accepted.
         let known = ids("SELECT id FROM jobs", &[])?;
+        // Uploads a previous process was receiving were never accepted.
+        for entry in std::fs::read_dir(&self.uploads_dir)? {
+            let _ = std::fs::remove_dir_all(entry?.path());
+        }
         for entry in std::fs::read_dir(&self.jobs_dir)? {
             let entry = entry?;
             let id = entry.file_name().to_string_lossy().parse::<i64>().ok();
@@ -174,16 +233,26 @@ impl Store {
         self.jobs_dir.join(id.to_string())
     }
 
-    /// Stores a new job: allocates its ids, writes (and syncs) its inputs,
-    /// then commits its row as `queued`. Returns the internal and the
-    /// public id.
+    /// A new, empty staging folder for an upload.
+    pub async fn stage(&self) -> io::Result<Staged> {
+        let dir = self
+            .uploads_dir
+            .join(uuid::Uuid::new_v4().simple().to_string());
+        tokio::fs::create_dir_all(&dir).await?;
+        Ok(Staged { dir })
+    }
+
+    /// Stores a new job of `tenant` (`None` without tokens) from the
+    /// inputs in `staged` (their files already synced): allocates its ids,
+    /// moves the inputs into its folder by renaming (no copy), then commits
+    /// its row as `queued`. Returns the internal and the public id.
     pub fn create(
         &self,
-        scene: &[u8],
-        job: &[u8],
-        pvs: Option<&[u8]>,
+        staged: &Staged,
         bake: bool,
+        tenant: Option<&str>,
     ) -> io::Result<(i64, String)> {
+        use std::io::Read;
         let db = self.db()?;
         // Ids are never reused, not even those of deleted jobs.
         let id: i64 = db
@@ -202,24 +271,58 @@ impl Store {
         let dir = self.job_dir(id);
         let _ = std::fs::remove_dir_all(&dir);
         std::fs::create_dir_all(&dir)?;
-        write_atomic(&dir.join("scene"), scene)?;
-        write_atomic(&dir.join("job.json"), job)?;
-        if let Some(p) = pvs {
-            write_atomic(&dir.join("pvs.json"), p)?;
+        let mut magic = [0u8; 4];
+        let glb = std::fs::File::open(staged.path(SCENE))?
+            .read_exact(&mut magic)
+            .is_ok()
+            && &magic == b"glTF";
+        for name in [SCENE, JOB, PVS] {
+            match std::fs::rename(staged.path(name), dir.join(name)) {
+                Err(e) if name == PVS && e.kind() == io::ErrorKind::NotFound => {}
+                r => r?,
+            }
         }
-        let kind = if scene.starts_with(b"glTF") {
-            "glb"
-        } else {
-            "json"
-        };
+        if let Ok(d) = std::fs::File::open(&dir) {
+            d.sync_all()?;
+        }
+        let kind = if glb { "glb" } else { "json" };
         let uid = new_uid();
         db.execute(
-            "INSERT INTO jobs (id, uid, state, bake, scene_kind, created_ms)
-             VALUES (?1, ?2, ?3, ?4, ?5, ?6)",
-            rusqlite::params![id, uid, JobState::Queued, bake as i64, kind, now_ms()],
+            "INSERT INTO jobs (id, uid, state, bake, scene_kind, created_ms, tenant)
+             VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7)",
+            rusqlite::params![
+                id,
+                uid,
+                JobState::Queued,
+                bake as i64,
+                kind,
+                now_ms(),
+                tenant
+            ],
         )
         .map_err(db_err)?;
         Ok((id, uid))
+    }
+
+    /// Stages `scene`, `job` and `pvs` (as an upload would) and creates
+    /// their job.
+    #[cfg(test)]
+    pub fn create_from_bytes(
+        &self,
+        scene: &[u8],
+        job: &[u8],
+        pvs: Option<&[u8]>,
+        tenant: Option<&str>,
+    ) -> io::Result<(i64, String)> {
+        let staged = tokio::runtime::Builder::new_current_thread()
+            .build()?
+            .block_on(self.stage())?;
+        write_atomic(&staged.path(SCENE), scene)?;
+        write_atomic(&staged.path(JOB), job)?;
+        if let Some(p) = pvs {
+            write_atomic(&staged.path(PVS), p)?;
+        }
+        self.create(&staged, false, tenant)
     }
 
     /// Records a job's new state, with its error or summary when given;
@@ -243,19 +346,19 @@ impl Store {
     /// The row of job `id`; `Ok(None)` when there is no such job (or its
     /// row cannot be read).
     pub fn row(&self, id: i64) -> io::Result<Option<JobRow>> {
-        self.row_where("id = ?1", &id)
+        self.row_where("id = ?1", &[&id])
     }
 
-    /// The row of the job of public id `uid`, in one query; `Ok(None)` when
-    /// there is none.
-    pub fn find(&self, uid: &str) -> io::Result<Option<JobRow>> {
-        self.row_where("uid = ?1", &uid)
+    /// The row of the job of public id `uid` that belongs to `tenant`
+    /// (`None`: to anyone), in one query; `Ok(None)` when there is none.
+    pub fn find(&self, uid: &str, tenant: Option<&str>) -> io::Result<Option<JobRow>> {
+        self.row_where("uid = ?1 AND (?2 IS NULL OR tenant = ?2)", &[&uid, &tenant])
     }
 
     fn row_where(
         &self,
         condition: &str,
-        param: &dyn rusqlite::ToSql,
+        params: &[&dyn rusqlite::ToSql],
     ) -> io::Result<Option<JobRow>> {
         let db = self.db()?;
         Ok(db
@@ -265,7 +368,7 @@ impl Store {
                             uid, id
                      FROM jobs WHERE {condition}"
                 ),
-                [param],
+                params,
                 |r| {
                     Ok(JobRow {
                         state: r.get(0)?,
@@ -284,13 +387,29 @@ impl Store {
             .ok())
     }
 
-    /// Up to `limit` job ids greater than `after`, ascending.
-    pub fn ids_after(&self, after: i64, limit: i64) -> io::Result<Vec<i64>> {
+    /// The jobs of `tenant` queued or running.
+    pub fn active_jobs(&self, tenant: &str) -> io::Result<usize> {
+        self.db()?
+            .query_row(
+                "SELECT COUNT(*) FROM jobs WHERE tenant = ?1 AND state IN (?2, ?3)",
+                rusqlite::params![tenant, JobState::Queued, JobState::Running],
+                |r| r.get::<_, i64>(0),
+            )
+            .map(|n| n as usize)
+            .map_err(db_err)
+    }
+
+    /// Up to `limit` ids of jobs of `tenant` (`None`: of anyone) greater
+    /// than `after`, ascending.
+    pub fn ids_after(&self, after: i64, limit: i64, tenant: Option<&str>) -> io::Result<Vec<i64>> {
         let db = self.db()?;
         let mut stmt = db
-            .prepare("SELECT id FROM jobs WHERE id > ?1 ORDER BY id LIMIT ?2")
+            .prepare(
+                "SELECT id FROM jobs WHERE id > ?1 AND (?3 IS NULL OR tenant = ?3)
+                 ORDER BY id LIMIT ?2",
+            )
             .map_err(db_err)?;
-        stmt.query_map([after, limit], |r| r.get(0))
+        stmt.query_map(rusqlite::params![after, limit, tenant], |r| r.get(0))
             .map_err(db_err)?
             .collect::<rusqlite::Result<_>>()
             .map_err(db_err)
@@ -365,19 +484,49 @@ mod tests {
             uuid::Uuid::parse_str(&old).unwrap().get_version(),
             Some(uuid::Version::Random)
         );
-        assert_eq!(store.find(&old).unwrap().map(|r| r.id), Some(1));
-        assert_eq!(store.find("1").unwrap().map(|r| r.id), None);
-        let (a, ua) = store.create(b"{}", b"{}", None, false).unwrap();
-        let (b, ub) = store.create(b"{}", b"{}", None, false).unwrap();
+        assert_eq!(store.find(&old, None).unwrap().map(|r| r.id), Some(1));
+        assert_eq!(store.find("1", None).unwrap().map(|r| r.id), None);
+        let (a, ua) = store.create_from_bytes(b"{}", b"{}", None, None).unwrap();
+        let (b, ub) = store.create_from_bytes(b"{}", b"{}", None, None).unwrap();
         assert_eq!((a, b), (2, 3));
         assert!(ua != ub && ua != old);
-        assert_eq!(store.find(&ub).unwrap().map(|r| r.id), Some(3));
+        assert_eq!(store.find(&ub, None).unwrap().map(|r| r.id), Some(3));
         assert_eq!(store.row(2).unwrap().unwrap().uid, ua);
         // Reopening keeps every id.
         drop(store);
         let store = Store::open(&dir).unwrap();
-        assert_eq!(store.find(&old).unwrap().map(|r| r.id), Some(1));
-        assert_eq!(store.find(&ua).unwrap().map(|r| r.id), Some(2));
+        assert_eq!(store.find(&old, None).unwrap().map(|r| r.id), Some(1));
+        assert_eq!(store.find(&ua, None).unwrap().map(|r| r.id), Some(2));
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    /// A tenant finds and lists only its own jobs and counts its active
+    /// ones; without a tenant every job is found.
+    #[test]
+    fn tenants_see_only_their_jobs() {
+        let dir = temp_dir("tenant");
+        let store = Store::open(&dir).unwrap();
+        let (a, ua) = store
+            .create_from_bytes(b"{}", b"{}", None, Some("a"))
+            .unwrap();
+        let (b, ub) = store
+            .create_from_bytes(b"{}", b"{}", None, Some("b"))
+            .unwrap();
+        let (c, _) = store
+            .create_from_bytes(b"{}", b"{}", None, Some("a"))
+            .unwrap();
+        let found = |uid: &str, t: Option<&str>| store.find(uid, t).unwrap().map(|r| r.id);
+        assert_eq!(found(&ua, Some("a")), Some(a));
+        assert_eq!(found(&ua, Some("b")), None);
+        assert_eq!(found(&ub, Some("a")), None);
+        assert_eq!(found(&ub, None), Some(b));
+        assert_eq!(store.ids_after(0, 10, Some("a")).unwrap(), vec![a, c]);
+        assert_eq!(store.ids_after(a, 10, Some("a")).unwrap(), vec![c]);
+        assert_eq!(store.ids_after(0, 10, None).unwrap(), vec![a, b, c]);
+        assert_eq!(store.active_jobs("a").unwrap(), 2);
+        store.set_state(c, JobState::Succeeded, None, None);
+        assert_eq!(store.active_jobs("a").unwrap(), 1);
+        assert_eq!(store.active_jobs("nobody").unwrap(), 0);
         let _ = std::fs::remove_dir_all(&dir);
     }
 }

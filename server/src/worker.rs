@@ -156,7 +156,7 @@ pub(crate) fn spawn_workers(
     count: usize,
 ) -> std::io::Result<()> {
     let rx = Arc::new(Mutex::new(rx));
-    for w in 0..count.max(1) {
+    for w in 0..count {
         let st = state.clone();
         let rx = rx.clone();
         std::thread::Builder::new()

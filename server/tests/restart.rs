@@ -33,7 +33,7 @@ fn request(addr: SocketAddr, method: &str, path: &str, body: &[u8]) -> Option<(u
 
 fn spawn(dir: &std::path::Path, addr: SocketAddr) -> Child {
     let child = Command::new(env!("CARGO_BIN_EXE_impostor-server"))
-        .args(["--listen", &addr.to_string(), "--data-dir"])
+        .args(["--no-auth", "--listen", &addr.to_string(), "--data-dir"])
         .arg(dir)
         .stdout(Stdio::null())
         .stderr(Stdio::null())

@@ -1,11 +1,13 @@
 //! Request extractors of the job routes: [`JobId`] (the `{id}` path
-//! parameter) and [`Submission`] (the body of `POST /v1/jobs`, multipart or
-//! JSON). Each describes its part of the request in the OpenAPI document.
+//! parameter), [`Caller`] (who asks) and [`Submission`] (the body of
+//! `POST /v1/jobs`, multipart or JSON, streamed to a staging folder).
+//! Each describes its part of the request in the OpenAPI document.
 
 use aide::generate::GenContext;
 use aide::openapi::{MediaType, Operation, RequestBody, Response, SchemaObject, StatusCode};
 use aide::operation::{OperationInput, OperationOutput, set_body};
 use axum::body::Bytes;
+use axum::extract::multipart::Field;
 use axum::extract::rejection::PathRejection;
 use axum::extract::{FromRequest, FromRequestParts, Multipart, Path, Request};
 use axum::http::{StatusCode as HttpStatus, header, request::Parts};
@@ -18,6 +20,61 @@ use optimizer::api::pvs::PvsFile;
 use optimizer::api::scene::SceneSummary;
 
 use crate::error::ApiError;
+use crate::store::{self, Staged};
+use crate::{Access, AppState};
+
+/// The name of the bearer-token security scheme in the OpenAPI document.
+pub(crate) const BEARER: &str = "bearer";
+
+/// Who makes the request (the [`Access`] the guard found from its token):
+/// the job routes see and act on that tenant's jobs only.
+pub struct Caller(pub Access);
+
+impl<S: Send + Sync> FromRequestParts<S> for Caller {
+    type Rejection = ApiError;
+
+    async fn from_request_parts(parts: &mut Parts, _: &S) -> Result<Self, ApiError> {
+        parts
+            .extensions
+            .get::<Access>()
+            .cloned()
+            .map(Caller)
+            .ok_or_else(|| ApiError::internal("a /v1 request reached its handler unguarded"))
+    }
+}
+
+impl OperationInput for Caller {
+    /// The route needs a bearer token (when the server has tokens), and
+    /// may answer 401 and 429 before its handler runs.
+    fn operation_input(_: &mut GenContext, operation: &mut Operation) {
+        let mut requirement = aide::openapi::SecurityRequirement::default();
+        requirement.insert(BEARER.into(), Vec::new());
+        operation.security.push(requirement);
+    }
+
+    fn inferred_early_responses(
+        ctx: &mut GenContext,
+        operation: &mut Operation,
+    ) -> Vec<(Option<StatusCode>, Response)> {
+        [
+            (
+                401,
+                "no token, or one the server does not know (or has revoked)",
+            ),
+            (
+                429,
+                "over the tenant's rate limit (`Retry-After` says when to try again)",
+            ),
+        ]
+        .into_iter()
+        .filter_map(|(code, description)| {
+            let mut r = ApiError::operation_response(ctx, operation)?;
+            r.description = description.into();
+            Some((Some(StatusCode::Code(code)), r))
+        })
+        .collect()
+    }
+}
 
 /// The `{id}` of a job route, as given (the handlers look it up: an id
 /// that is not a job's, numeric ids of older versions included, is 404).
@@ -50,14 +107,13 @@ impl OperationInput for JobId {
 }
 
 /// A job submission: the scene (a GLB, glTF JSON or scene summary), the job
-/// JSON, an optional PVS file and whether to bake the impostors.
+/// JSON, an optional PVS file, staged on disk, and whether to bake the
+/// impostors.
 pub struct Submission {
-    /// The scene's bytes.
-    pub scene: Vec<u8>,
-    /// The job's JSON.
-    pub job: Vec<u8>,
-    /// The PVS file's JSON, for visibility `precomputed`.
-    pub pvs: Option<Vec<u8>>,
+    /// The inputs' files ([`store::SCENE`], [`store::JOB`], [`store::PVS`]).
+    pub staged: Staged,
+    /// Whether a PVS file was given.
+    pub has_pvs: bool,
     /// Whether to bake the impostors after the placement.
     pub bake: bool,
 }
@@ -92,9 +148,31 @@ fn multipart_status(status: HttpStatus) -> HttpStatus {
     }
 }
 
+/// Streams a multipart part into the file at `path`, chunk by chunk as
+/// it arrives, and syncs it.
+async fn stream_to(
+    mut field: Field<'_>,
+    name: &str,
+    path: &std::path::Path,
+) -> Result<(), ApiError> {
+    use tokio::io::AsyncWriteExt;
+    let mut file = tokio::fs::File::create(path)
+        .await
+        .map_err(ApiError::internal)?;
+    while let Some(chunk) = field.chunk().await.map_err(|e| {
+        ApiError::new(
+            multipart_status(e.status()),
+            format!("multipart part `{name}`: {}", e.body_text()),
+        )
+    })? {
+        file.write_all(&chunk).await.map_err(ApiError::internal)?;
+    }
+    file.sync_all().await.map_err(ApiError::internal)
+}
+
 impl Submission {
-    async fn from_multipart(mut mp: Multipart) -> Result<Self, ApiError> {
-        let (mut scene, mut job, mut pvs, mut bake) = (None, None, None, false);
+    async fn from_multipart(mut mp: Multipart, staged: Staged) -> Result<Self, ApiError> {
+        let (mut scene, mut job, mut has_pvs, mut bake) = (false, false, false, false);
         loop {
             let field = mp.next_field().await.map_err(|e| {
                 ApiError::new(
@@ -102,19 +180,41 @@ impl Submission {
                     format!("bad multipart body: {}", e.body_text()),
                 )
             })?;
-            let Some(field) = field else { break };
+            let Some(mut field) = field else { break };
             let name = field.name().unwrap_or("").to_string();
-            let data = field.bytes().await.map_err(|e| {
-                ApiError::new(
-                    multipart_status(e.status()),
-                    format!("multipart part `{name}`: {}", e.body_text()),
-                )
-            })?;
-            match name.as_str() {
-                "scene" => scene = Some(data),
-                "job" => job = Some(data),
-                "pvs" => pvs = Some(data),
-                "bake" => bake = data.as_ref() == b"true",
+            let file = match name.as_str() {
+                "scene" => {
+                    scene = true;
+                    store::SCENE
+                }
+                "job" => {
+                    job = true;
+                    store::JOB
+                }
+                "pvs" => {
+                    has_pvs = true;
+                    store::PVS
+                }
+                "bake" => {
+                    // A word: read it, at most a few bytes of it.
+                    let mut value = Vec::new();
+                    while let Some(chunk) = field.chunk().await.map_err(|e| {
+                        ApiError::new(
+                            multipart_status(e.status()),
+                            format!("multipart part `bake`: {}", e.body_text()),
+                        )
+                    })? {
+                        value.extend_from_slice(&chunk);
+                        if value.len() > 16 {
+                            return Err(ApiError::new(
+                                HttpStatus::BAD_REQUEST,
+                                "multipart part `bake` must be \"true\" or \"false\"",
+                            ));
+                        }
+                    }
+                    bake = value == b"true";
+                    continue;
+                }
                 other => {
                     return Err(ApiError::new(
                         HttpStatus::BAD_REQUEST,
@@ -123,7 +223,8 @@ impl Submission {
                         ),
                     ));
                 }
-            }
+            };
+            stream_to(field, &name, &staged.path(file)).await?;
         }
         let missing = |part: &str| {
             ApiError::new(
@@ -131,39 +232,54 @@ impl Submission {
                 format!("multipart part `{part}` is missing"),
             )
         };
-        let scene = scene.ok_or_else(|| missing("scene"))?;
-        let job = job.ok_or_else(|| missing("job"))?;
+        if !scene {
+            return Err(missing("scene"));
+        }
+        if !job {
+            return Err(missing("job"));
+        }
         Ok(Submission {
-            scene: scene.to_vec(),
-            job: job.to_vec(),
-            pvs: pvs.map(|p| p.to_vec()),
+            staged,
+            has_pvs,
             bake,
         })
     }
 
-    fn from_json(body: &[u8]) -> Result<Self, ApiError> {
+    async fn from_json(body: &[u8], staged: Staged) -> Result<Self, ApiError> {
         let sub: JsonSubmission = serde_json::from_slice(body).map_err(|e| {
             ApiError::new(
                 HttpStatus::BAD_REQUEST,
                 format!("body must be {{\"scene\": <scene summary>, \"job\": <job>}}: {e}"),
             )
         })?;
+        let parts = [
+            (store::SCENE, Some(&sub.scene)),
+            (store::JOB, Some(&sub.job)),
+            (store::PVS, sub.pvs.as_ref()),
+        ];
+        for (file, value) in parts {
+            if let Some(v) = value {
+                let bytes = serde_json::to_vec(v).map_err(ApiError::internal)?;
+                let mut f = tokio::fs::File::create(staged.path(file))
+                    .await
+                    .map_err(ApiError::internal)?;
+                use tokio::io::AsyncWriteExt;
+                f.write_all(&bytes).await.map_err(ApiError::internal)?;
+                f.sync_all().await.map_err(ApiError::internal)?;
+            }
+        }
         Ok(Submission {
-            scene: serde_json::to_vec(&sub.scene).map_err(ApiError::internal)?,
-            job: serde_json::to_vec(&sub.job).map_err(ApiError::internal)?,
-            pvs: match &sub.pvs {
-                Some(p) => Some(serde_json::to_vec(p).map_err(ApiError::internal)?),
-                None => None,
-            },
+            staged,
+            has_pvs: sub.pvs.is_some(),
             bake: sub.bake,
         })
     }
 }
 
-impl<S: Send + Sync> FromRequest<S> for Submission {
+impl FromRequest<AppState> for Submission {
     type Rejection = ApiError;
 
-    async fn from_request(req: Request, state: &S) -> Result<Self, ApiError> {
+    async fn from_request(req: Request, state: &AppState) -> Result<Self, ApiError> {
         let ctype = req
             .headers()
             .get(header::CONTENT_TYPE)
@@ -174,12 +290,14 @@ impl<S: Send + Sync> FromRequest<S> for Submission {
             let mp = Multipart::from_request(req, state).await.map_err(|e| {
                 ApiError::new(HttpStatus::BAD_REQUEST, format!("bad multipart body: {e}"))
             })?;
-            Submission::from_multipart(mp).await
+            let staged = state.0.store.stage().await.map_err(ApiError::internal)?;
+            Submission::from_multipart(mp, staged).await
         } else if ctype.starts_with("application/json") {
             let body = Bytes::from_request(req, state).await.map_err(|e| {
                 ApiError::new(e.status(), format!("request body: {}", e.body_text()))
             })?;
-            Submission::from_json(&body)
+            let staged = state.0.store.stage().await.map_err(ApiError::internal)?;
+            Submission::from_json(&body, staged).await
         } else {
             Err(ApiError::new(
                 HttpStatus::UNSUPPORTED_MEDIA_TYPE,

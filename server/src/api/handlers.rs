@@ -13,21 +13,22 @@ use optimizer::api::placement::Placement;
 use axum::response::IntoResponse;
 
 use super::bodies::{EventStream, Glb, HtmlPage, OpenApiJson, StoredJson};
-use super::extract::{JobId, Submission};
+use super::extract::{Caller, JobId, Submission};
 use super::types::{Accepted, DeleteAnswer, DeleteOutcome, Health, JobEvent, JobList, JobStatus};
 use crate::error::ApiError;
 use crate::job::{CANCELLED_BY_REQUEST, JobState};
 use crate::pipeline::check_submission;
-use crate::store::JobRow;
-use crate::{AppState, OPTIMIZER_VERSION};
+use crate::store::{self, JobRow};
+use crate::{Access, AppState, OPTIMIZER_VERSION};
 
 /// `POST /v1/jobs`: checks and stores a submission, then queues it.
 pub(crate) async fn submit(
     State(st): State<AppState>,
+    Caller(access): Caller,
     sub: Submission,
 ) -> Result<Accepted, ApiError> {
     // Parsing the scene and writing the files is blocking work.
-    let id = tokio::task::spawn_blocking(move || accept(&st, sub))
+    let id = tokio::task::spawn_blocking(move || accept(&st, &access, sub))
         .await
         .map_err(ApiError::internal)??;
     Ok(Accepted {
@@ -36,15 +37,32 @@ pub(crate) async fn submit(
     })
 }
 
-/// Checks, stores and queues a submission. Returns the new job's public id.
-fn accept(st: &AppState, sub: Submission) -> Result<String, ApiError> {
-    check_submission(&sub.scene, &sub.job, sub.pvs.as_deref(), sub.bake)?;
+/// Checks, stores and queues a submission of the caller's tenant. Returns
+/// the new job's public id.
+fn accept(st: &AppState, access: &Access, sub: Submission) -> Result<String, ApiError> {
+    {
+        // The inputs are read back for the check only while it runs.
+        let read = |name| std::fs::read(sub.staged.path(name)).map_err(ApiError::internal);
+        let pvs = if sub.has_pvs {
+            Some(read(store::PVS)?)
+        } else {
+            None
+        };
+        check_submission(
+            &read(store::SCENE)?,
+            &read(store::JOB)?,
+            pvs.as_deref(),
+            sub.bake,
+        )?;
+    }
     st.check_queue()?;
+    st.check_quota(access)?;
+    let tenant = access.tenant();
     let (id, uid) =
         st.0.store
-            .create(&sub.scene, &sub.job, sub.pvs.as_deref(), sub.bake)
+            .create(&sub.staged, sub.bake, tenant)
             .map_err(ApiError::internal)?;
-    tracing::info!(job = id, uid, "accepted");
+    tracing::info!(job = id, uid, tenant, "accepted");
     st.0.queue.push(id);
     Ok(uid)
 }
@@ -62,13 +80,14 @@ async fn blocking<T: Send + 'static>(
         .map_err(ApiError::internal)?
 }
 
-/// The row of the job of public id `uid` (read on the blocking pool); 404
-/// when there is none (numeric ids of older versions included).
-async fn find(st: &AppState, uid: &str) -> Result<JobRow, ApiError> {
-    let uid = uid.to_string();
+/// The row of the caller's job of public id `uid` (read on the blocking
+/// pool); 404 when there is none (another tenant's job, numeric ids of
+/// older versions included).
+async fn find(st: &AppState, access: &Access, uid: &str) -> Result<JobRow, ApiError> {
+    let (uid, access) = (uid.to_string(), access.clone());
     blocking(st, move |st| {
         st.0.store
-            .find(&uid)
+            .find(&uid, access.tenant())
             .map_err(ApiError::internal)?
             .ok_or_else(|| ApiError::no_job(&uid))
     })
@@ -106,9 +125,10 @@ fn job_status(st: &AppState, row: JobRow) -> JobStatus {
 /// `GET /v1/jobs/{id}`.
 pub(crate) async fn status(
     State(st): State<AppState>,
+    Caller(access): Caller,
     JobId(uid): JobId,
 ) -> Result<Json<JobStatus>, ApiError> {
-    let row = find(&st, &uid).await?;
+    let row = find(&st, &access, &uid).await?;
     Ok(Json(job_status(&st, row)))
 }
 
@@ -129,22 +149,26 @@ fn default_limit() -> i64 {
     50
 }
 
-/// `GET /v1/jobs`: a page of jobs, oldest first.
+/// `GET /v1/jobs`: a page of the caller's jobs, oldest first.
 pub(crate) async fn list(
     State(st): State<AppState>,
+    Caller(access): Caller,
     Query(q): Query<ListQuery>,
 ) -> Result<Json<JobList>, ApiError> {
-    blocking(&st, move |st| list_page(st, q)).await.map(Json)
+    blocking(&st, move |st| list_page(st, access.tenant(), q))
+        .await
+        .map(Json)
 }
 
-/// A page of `GET /v1/jobs` (blocking: database reads).
-fn list_page(st: &AppState, q: ListQuery) -> Result<JobList, ApiError> {
+/// A page of `GET /v1/jobs` of `tenant`'s jobs (`None`: everyone's;
+/// blocking: database reads).
+fn list_page(st: &AppState, tenant: Option<&str>, q: ListQuery) -> Result<JobList, ApiError> {
     let limit = q.limit.clamp(1, 500);
     let after = match &q.after {
         None => 0,
         Some(uid) => {
             st.0.store
-                .find(uid)
+                .find(uid, tenant)
                 .map_err(ApiError::internal)?
                 .ok_or_else(|| {
                     ApiError::new(
@@ -157,7 +181,7 @@ fn list_page(st: &AppState, q: ListQuery) -> Result<JobList, ApiError> {
     };
     let ids =
         st.0.store
-            .ids_after(after, limit)
+            .ids_after(after, limit, tenant)
             .map_err(ApiError::internal)?;
     // A job deleted between the two reads is left out of the page.
     let jobs: Vec<JobStatus> = ids
@@ -173,8 +197,13 @@ fn list_page(st: &AppState, q: ListQuery) -> Result<JobList, ApiError> {
 
 /// The bytes of result `file` of the job of public id `id`: 409 until the
 /// job has succeeded, 404 when the job has no such file.
-async fn result_file(st: &AppState, id: &str, file: &str) -> Result<Vec<u8>, ApiError> {
-    let row = find(st, id).await?;
+async fn result_file(
+    st: &AppState,
+    access: &Access,
+    id: &str,
+    file: &str,
+) -> Result<Vec<u8>, ApiError> {
+    let row = find(st, access, id).await?;
     let state = row.state;
     if state != JobState::Succeeded {
         return Err(ApiError::new(
@@ -214,10 +243,11 @@ fn job_event(st: &AppState, id: i64) -> Option<JobEvent> {
 /// ending after its final state (or when the job is deleted).
 pub(crate) async fn events(
     State(st): State<AppState>,
+    Caller(access): Caller,
     JobId(uid): JobId,
 ) -> Result<EventStream, ApiError> {
     use axum::response::sse::{Event, KeepAlive, Sse};
-    let id = find(&st, &uid).await?.id;
+    let id = find(&st, &access, &uid).await?.id;
     let stream = futures_util::stream::unfold(
         (st, None::<JobEvent>, false),
         move |(st, last, done)| async move {
@@ -248,46 +278,53 @@ pub(crate) async fn events(
 /// `GET /v1/jobs/{id}/placement`.
 pub(crate) async fn placement(
     State(st): State<AppState>,
+    Caller(access): Caller,
     JobId(id): JobId,
 ) -> Result<StoredJson<Placement>, ApiError> {
     Ok(StoredJson::new(
-        result_file(&st, &id, "placement.json").await?,
+        result_file(&st, &access, &id, "placement.json").await?,
     ))
 }
 
 /// `GET /v1/jobs/{id}/evaluation`.
 pub(crate) async fn evaluation(
     State(st): State<AppState>,
+    Caller(access): Caller,
     JobId(id): JobId,
 ) -> Result<StoredJson<Evaluation>, ApiError> {
     Ok(StoredJson::new(
-        result_file(&st, &id, "evaluation.json").await?,
+        result_file(&st, &access, &id, "evaluation.json").await?,
     ))
 }
 
 /// `GET /v1/jobs/{id}/impostors.glb`.
 pub(crate) async fn impostors(
     State(st): State<AppState>,
+    Caller(access): Caller,
     JobId(id): JobId,
 ) -> Result<Glb, ApiError> {
-    Ok(Glb(result_file(&st, &id, "impostors.glb").await?))
+    Ok(Glb(result_file(&st, &access, &id, "impostors.glb").await?))
 }
 
 /// `GET /v1/jobs/{id}/report`.
 pub(crate) async fn report(
     State(st): State<AppState>,
+    Caller(access): Caller,
     JobId(id): JobId,
 ) -> Result<HtmlPage, ApiError> {
-    Ok(HtmlPage(result_file(&st, &id, "report.html").await?))
+    Ok(HtmlPage(
+        result_file(&st, &access, &id, "report.html").await?,
+    ))
 }
 
 /// `DELETE /v1/jobs/{id}`: cancels a queued job, asks a running one to
 /// stop, deletes a finished one with its files.
 pub(crate) async fn delete(
     State(st): State<AppState>,
+    Caller(access): Caller,
     JobId(uid): JobId,
 ) -> Result<Json<DeleteAnswer>, ApiError> {
-    let row = find(&st, &uid).await?;
+    let row = find(&st, &access, &uid).await?;
     let id = row.id;
     // Removing a job's folder may take a while: on the blocking pool.
     let outcome = blocking(&st, move |st| {

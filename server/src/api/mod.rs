@@ -163,10 +163,25 @@ fn routes() -> ApiRouter<AppState> {
 
 fn describe(api: TransformOpenApi<'_>) -> TransformOpenApi<'_> {
     api.title("impostor placement service")
+        .security_scheme(
+            extract::BEARER,
+            aide::openapi::SecurityScheme::Http {
+                scheme: "bearer".into(),
+                bearer_format: Some("imp_ followed by 64 hex digits".into()),
+                description: Some(
+                    "an API token of the server's tokens file (`impostor-server token add`); \
+                     not needed by a server started with --no-auth"
+                        .into(),
+                ),
+                extensions: Default::default(),
+            },
+        )
         .version(optimizer::VERSION)
         .description(
             "Submit scene jobs, follow their progress, fetch placements, evaluations, \
-             reports and baked impostors. Errors are answered with `{\"error\": ...}`.",
+             reports and baked impostors. Every `/v1` route needs `Authorization: Bearer \
+             <token>` and sees the token's tenant's jobs only. Errors are answered with \
+             `{\"error\": ...}`.",
         )
         .tag(Tag {
             name: JOBS.into(),

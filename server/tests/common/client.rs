@@ -13,9 +13,25 @@ pub async fn request(
     ctype: Option<&str>,
     body: &[u8],
 ) -> std::io::Result<(u16, Vec<u8>)> {
+    Ok(request_with(addr, method, path, &[], ctype, body).await?.0)
+}
+
+/// One HTTP/1.1 request with extra `headers`; returns status and body, and
+/// the answer's headers (lower-case text).
+pub async fn request_with(
+    addr: SocketAddr,
+    method: &str,
+    path: &str,
+    headers: &[(&str, &str)],
+    ctype: Option<&str>,
+    body: &[u8],
+) -> std::io::Result<((u16, Vec<u8>), String)> {
     let bad = |m: &str| std::io::Error::new(std::io::ErrorKind::InvalidData, m.to_string());
     let mut s = tokio::net::TcpStream::connect(addr).await?;
     let mut head = format!("{method} {path} HTTP/1.1\r\nHost: test\r\nConnection: close\r\n");
+    for (name, value) in headers {
+        head.push_str(&format!("{name}: {value}\r\n"));
+    }
     if let Some(c) = ctype {
         head.push_str(&format!("Content-Type: {c}\r\n"));
     }
@@ -58,5 +74,5 @@ pub async fn request(
         }
         payload = out;
     }
-    Ok((status, payload))
+    Ok(((status, payload), headers))
 }
