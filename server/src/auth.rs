@@ -6,14 +6,15 @@
 //! strong as a slow password hash would be, and a leaked file gives no
 //! token. [`add`], [`list`] and [`revoke`] are the `impostor-server token`
 //! commands over it; [`Tokens`] is the set the server checks
-//! `Authorization: Bearer` against, read again when the file changes, so
-//! tokens added or revoked take effect within a second, without a restart.
+//! `Authorization: Bearer` against, read again (by a thread of its own)
+//! when the file changes, so tokens added or revoked take effect within a
+//! second, without a restart.
 
 use std::collections::HashMap;
 use std::io;
 use std::path::{Path, PathBuf};
 use std::sync::Mutex;
-use std::time::{Duration, Instant, SystemTime};
+use std::time::{Duration, SystemTime};
 
 use serde::{Deserialize, Serialize};
 use sha2::{Digest, Sha256};
@@ -186,7 +187,6 @@ pub(crate) struct Tokens {
 }
 
 struct Loaded {
-    checked: Instant,
     /// The file's modification time and length when it was read.
     stamp: Option<(SystemTime, u64)>,
     tenants: HashMap<String, String>,
@@ -233,7 +233,6 @@ impl Tokens {
         Ok(Tokens {
             path: path.to_path_buf(),
             loaded: Mutex::new(Loaded {
-                checked: Instant::now(),
                 stamp,
                 tenants: tenants(file),
             }),
@@ -241,34 +240,68 @@ impl Tokens {
     }
 
     /// The tenant of `token`, or `None` for a token the file does not
-    /// list. The file is read again when it changed (looked at once a
-    /// second at most); a file that became unreadable or invalid keeps
-    /// the tokens read before (logged), one that was removed none.
+    /// list: a lookup in memory, never a file read.
     pub fn tenant(&self, token: &str) -> Option<String> {
         let digest = sha256_hex(token);
-        let mut loaded = self.loaded.lock().ok()?;
-        if loaded.checked.elapsed() >= RELOAD_EVERY {
-            loaded.checked = Instant::now();
-            let now = stamp(&self.path);
-            if now != loaded.stamp {
-                match TokenFile::read(&self.path) {
-                    Ok(file) => {
-                        loaded.tenants = tenants(file);
-                        loaded.stamp = now;
-                        tracing::info!("tokens file {} read again", self.path.display());
-                    }
-                    Err(e) if e.kind() == io::ErrorKind::NotFound => {
-                        loaded.tenants.clear();
-                        loaded.stamp = None;
-                        tracing::warn!("tokens file {} removed: no token is accepted", {
-                            self.path.display()
-                        });
-                    }
-                    Err(e) => tracing::error!("{e}; the tokens read before stay in force"),
-                }
+        self.loaded.lock().ok()?.tenants.get(&digest).cloned()
+    }
+
+    /// Reads the file again if it changed since it was last read: a file
+    /// that became unreadable or invalid keeps the tokens read before
+    /// (logged), one that was removed none. The server calls it every
+    /// [`RELOAD_EVERY`] on a thread of its own.
+    pub fn refresh(&self) {
+        let now = stamp(&self.path);
+        let Ok(loaded) = self.loaded.lock() else {
+            return;
+        };
+        if now == loaded.stamp {
+            return;
+        }
+        drop(loaded);
+        let read = TokenFile::read(&self.path);
+        let Ok(mut loaded) = self.loaded.lock() else {
+            return;
+        };
+        match read {
+            Ok(file) => {
+                loaded.tenants = tenants(file);
+                loaded.stamp = now;
+                tracing::info!("tokens file {} read again", self.path.display());
+            }
+            Err(e) if e.kind() == io::ErrorKind::NotFound => {
+                loaded.tenants.clear();
+                loaded.stamp = None;
+                tracing::warn!(
+                    "tokens file {} removed: no token is accepted",
+                    self.path.display()
+                );
+            }
+            Err(e) => {
+                // Not again until the file changes once more.
+                loaded.stamp = now;
+                tracing::error!("{e}; the tokens read before stay in force");
             }
         }
-        loaded.tenants.get(&digest).cloned()
+    }
+
+    /// Calls [`Tokens::refresh`] every [`RELOAD_EVERY`] for as long as
+    /// the tokens live, on a thread of its own (file reads never run on
+    /// the async runtime).
+    pub fn spawn_refresh(tokens: &std::sync::Arc<Tokens>) -> io::Result<()> {
+        let weak = std::sync::Arc::downgrade(tokens);
+        std::thread::Builder::new()
+            .name("tokens".into())
+            .spawn(move || {
+                loop {
+                    std::thread::sleep(RELOAD_EVERY);
+                    match weak.upgrade() {
+                        Some(t) => t.refresh(),
+                        None => return,
+                    }
+                }
+            })?;
+        Ok(())
     }
 }
 
@@ -325,10 +358,19 @@ mod tests {
                 "{bad:?}"
             );
         }
-        // The server sees the revocation once it looks at the file again.
-        std::thread::sleep(RELOAD_EVERY + Duration::from_millis(50));
+        // The server sees the revocation once it reads the file again.
+        assert_eq!(tokens.tenant(&a).as_deref(), Some("studio-a"));
+        tokens.refresh();
         assert_eq!(tokens.tenant(&a), None);
         assert_eq!(tokens.tenant(&b).as_deref(), Some("studio.b_2"));
+        // A file made invalid keeps the tokens read before; a removed one
+        // none.
+        std::fs::write(&path, b"{not json").unwrap();
+        tokens.refresh();
+        assert_eq!(tokens.tenant(&b).as_deref(), Some("studio.b_2"));
+        std::fs::remove_file(&path).unwrap();
+        tokens.refresh();
+        assert_eq!(tokens.tenant(&b), None);
     }
 
     /// A missing tokens file says how to make one; a malformed one names

@@ -102,7 +102,7 @@ struct Inner {
     store: store::Store,
     queue: worker::Queue,
     live: worker::LiveJobs,
-    tokens: Option<auth::Tokens>,
+    tokens: Option<Arc<auth::Tokens>>,
     limiter: Option<governor::DefaultKeyedRateLimiter<String>>,
 }
 
@@ -115,7 +115,14 @@ impl AppState {
     /// Opens (or creates) the data directory and its database, re-queues the
     /// jobs a previous process left unfinished and starts the workers.
     pub fn open(cfg: Config) -> std::io::Result<AppState> {
-        let tokens = cfg.tokens.as_deref().map(auth::Tokens::open).transpose()?;
+        let tokens = match cfg.tokens.as_deref() {
+            Some(path) => {
+                let tokens = Arc::new(auth::Tokens::open(path)?);
+                auth::Tokens::spawn_refresh(&tokens)?;
+                Some(tokens)
+            }
+            None => None,
+        };
         let limiter = cfg
             .rate_limit
             .and_then(std::num::NonZeroU32::new)
