@@ -171,6 +171,25 @@ pub fn sample_report() -> crate::report::Report {
                 violations_in_cpv_views: over,
                 control_violations: 40,
                 parallax_max_px: Some(0.9 + 0.1 * k),
+                estimates: Some(crate::api::evaluation::EstimateCheck {
+                    cpvs_sampled: 120,
+                    ratio_original_median: 0.8 * k,
+                    ratio_final_median: 0.85 * k,
+                    cpvs_never_over: 30,
+                    points: (0..40u32)
+                        .map(|i| {
+                            let f = f64::from(i) / 40.0;
+                            crate::api::evaluation::EstimatePoint {
+                                cpv: i,
+                                views: 1 + i % 3,
+                                estimate_ms: t * (1.0 + 0.3 * f),
+                                exact_max_ms: t * k * (0.7 + 0.4 * f),
+                                estimate_final_ms: t * (0.9 + 0.1 * f),
+                                exact_final_max_ms: t * k * (0.6 + 0.3 * f),
+                            }
+                        })
+                        .collect(),
+                }),
             }),
         }
     };

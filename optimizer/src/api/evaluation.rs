@@ -143,6 +143,57 @@ pub struct Evaluation {
     /// Geometric parallax of the impostors (absent without impostors).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub parallax: Option<ParallaxCheck>,
+    /// The placement's estimated problem-view times against the exact
+    /// times of the views sampled in them (absent when no sampled view
+    /// lies in a problem view).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub estimates: Option<EstimateCheck>,
+}
+
+/// Estimate against truth (`evaluation.estimates`): each problem view's
+/// estimated time (conservative: no view of it should take longer)
+/// against the largest exact time among the sampled views (uniform and
+/// inside problem views) that lie in it, without impostors and with the
+/// placement's. The gap decides how much memory is spent: impostors are
+/// bought for the estimate's excess over the target.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct EstimateCheck {
+    /// Problem views with at least one sampled view.
+    pub cpvs_sampled: u64,
+    /// Median over them of the largest sampled exact time without
+    /// impostors over the estimate without impostors (at most 1 where the
+    /// estimate is conservative; the smaller, the more memory is spent on
+    /// the estimate's excess).
+    pub ratio_original_median: f64,
+    /// The same ratio with the placement's impostors, against the
+    /// estimate with them.
+    pub ratio_final_median: f64,
+    /// Sampled problem views none of whose sampled views exceeds the
+    /// target without impostors: as far as the samples show, their
+    /// impostors were bought for the estimate's excess alone.
+    pub cpvs_never_over: u64,
+    /// Up to 2,000 of the sampled problem views, the most sampled first
+    /// (ties by id).
+    pub points: Vec<EstimatePoint>,
+}
+
+/// One problem view of [`EstimateCheck`].
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct EstimatePoint {
+    /// The problem view's id.
+    pub cpv: u32,
+    /// Sampled views in it.
+    pub views: u32,
+    /// Its estimated time without impostors, ms.
+    pub estimate_ms: f64,
+    /// The largest exact time of its sampled views without impostors, ms.
+    pub exact_max_ms: f64,
+    /// Its estimated time with the placement's impostors, ms.
+    pub estimate_final_ms: f64,
+    /// The largest exact time of its sampled views with them, ms.
+    pub exact_final_max_ms: f64,
 }
 
 /// The image quality criterion checked geometrically for every impostor

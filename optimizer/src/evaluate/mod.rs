@@ -17,6 +17,7 @@
 //! set is counted in `visibility.missed_objects` (0 in conservative mode).
 
 mod compare;
+mod estimates;
 pub mod images;
 mod index;
 mod parallax;
@@ -408,6 +409,17 @@ impl Prepared<'_> {
             image: None,
             visibility,
             parallax: parallax_check(job, placement, opts.seed),
+            estimates: estimates::estimate_check(
+                |c| {
+                    let p = placement.cpvs.get(c as usize)?;
+                    Some((p.time_ms_original, p.time_ms_final))
+                },
+                samples
+                    .iter()
+                    .chain(&cpv_samples)
+                    .map(|s| (s.cpv, s.time, s.bare)),
+                t_max,
+            ),
         })
     }
 }

@@ -181,7 +181,16 @@ pub struct EvalSummary {
     /// impostors).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub parallax_max_px: Option<f64>,
+    /// The run's estimates against exact times sampled in its problem
+    /// views, with at most [`REPORT_ESTIMATE_POINTS`] of them (absent when
+    /// no sampled view lay in a problem view).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub estimates: Option<crate::api::evaluation::EstimateCheck>,
 }
+
+/// The most problem views a report keeps per run for its estimate chart
+/// (the most sampled ones).
+pub const REPORT_ESTIMATE_POINTS: usize = 400;
 
 impl EvalSummary {
     /// Views that broke the guarantee: over the target in solved problem
@@ -206,6 +215,10 @@ impl From<&crate::api::evaluation::Evaluation> for EvalSummary {
             violations_in_cpv_views: e.violations_in_cpv_views,
             control_violations: e.control.violations_in_solved + e.control.violations_in_cpv_views,
             parallax_max_px: e.parallax.as_ref().map(|p| p.max_px),
+            estimates: e.estimates.clone().map(|mut x| {
+                x.points.truncate(REPORT_ESTIMATE_POINTS);
+                x
+            }),
         }
     }
 }

@@ -4,7 +4,7 @@
 use crate::report::{Report, Run};
 
 /// Header of `runs.csv`.
-const RUNS_HEADER: [&str; 24] = [
+const RUNS_HEADER: [&str; 27] = [
     "method",
     "knob",
     "value",
@@ -29,6 +29,9 @@ const RUNS_HEADER: [&str; 24] = [
     "eval_violations_in_solved",
     "eval_max_ms_in_solved",
     "eval_parallax_max_px",
+    "eval_control_violations",
+    "eval_estimate_ratio_median",
+    "eval_estimate_ratio_final_median",
 ];
 
 /// The report's data as CSV files, `(file name, contents)`: `runs.csv` (one
@@ -89,8 +92,17 @@ fn runs_csv(runs: &[Run]) -> String {
                 e.violations_in_solved.to_string(),
                 e.max_ms_in_solved.to_string(),
                 e.parallax_max_px.map(|x| x.to_string()).unwrap_or_default(),
+                e.control_violations.to_string(),
+                e.estimates
+                    .as_ref()
+                    .map(|x| x.ratio_original_median.to_string())
+                    .unwrap_or_default(),
+                e.estimates
+                    .as_ref()
+                    .map(|x| x.ratio_final_median.to_string())
+                    .unwrap_or_default(),
             ]),
-            None => fields.extend(std::iter::repeat_n(String::new(), 9)),
+            None => fields.extend(std::iter::repeat_n(String::new(), 12)),
         }
         row(&mut out, fields);
     }

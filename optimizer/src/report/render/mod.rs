@@ -12,6 +12,11 @@
 //!   with that knob.
 //! - **Walkthrough**: one chart per method of `walkthroughs`, one line per
 //!   target.
+//! - **Estimate against truth**: one scatter per method (its base run, else
+//!   its first run with estimates): each sampled problem view's estimate
+//!   against the largest exact time sampled in it; a table of every run's
+//!   ratios and control (views over the target with no impostor; a run
+//!   whose control is 0 is flagged: its check could not have failed).
 //!
 //! Failed runs (status other than `ok`) and values that cannot be placed
 //! on an axis are left out of the charts and listed under them; every run
@@ -20,6 +25,7 @@
 mod chart;
 mod csv;
 mod sections;
+mod truth;
 
 use std::fmt::Write as _;
 
@@ -75,13 +81,14 @@ pub fn render_html(r: &Report) -> String {
     };
     let _ = writeln!(
         h,
-        "<nav><a href=\"#memory\">Memory</a> · <a href=\"#achieved\">Frame time</a>{budget_link} · <a href=\"#speed\">Speed vs accuracy</a> · <a href=\"#walkthrough\">Walkthrough</a> · <a href=\"#stability\">Stability</a> · <a href=\"#runs\">Runs</a></nav>"
+        "<nav><a href=\"#memory\">Memory</a> · <a href=\"#achieved\">Frame time</a>{budget_link} · <a href=\"#speed\">Speed vs accuracy</a> · <a href=\"#walkthrough\">Walkthrough</a> · <a href=\"#estimates\">Estimates</a> · <a href=\"#stability\">Stability</a> · <a href=\"#runs\">Runs</a></nav>"
     );
     p.memory_chart(&mut h);
     p.achieved_chart(&mut h);
     p.budget_chart(&mut h);
     p.speed_charts(&mut h);
     p.walkthrough_charts(&mut h);
+    p.estimate_charts(&mut h);
     p.stability(&mut h);
     p.runs_table(&mut h);
     h.push_str("</body>\n</html>\n");
@@ -324,9 +331,10 @@ mod tests {
         assert_eq!(html.matches("<html").count(), 1);
         assert_eq!(html.matches("</html>").count(), 1);
         // Memory, achieved, budget, two speed charts (cell size, budget),
-        // two walkthroughs (shafts, boxes), stability.
-        assert_eq!(html.matches("<svg").count(), 8);
-        assert_eq!(html.matches("</svg>").count(), 8);
+        // two walkthroughs (shafts, boxes), three estimate charts (one per
+        // method), stability.
+        assert_eq!(html.matches("<svg").count(), 11);
+        assert_eq!(html.matches("</svg>").count(), 11);
         for id in [
             "chart-memory",
             "chart-achieved",
@@ -335,6 +343,9 @@ mod tests {
             "chart-speed-1",
             "chart-walk-0",
             "chart-walk-1",
+            "chart-estimate-0",
+            "chart-estimate-1",
+            "chart-estimate-2",
             "chart-stability",
         ] {
             let svg = chart_svg(&html, id);
@@ -588,6 +599,8 @@ mod tests {
         assert!(walk.contains("No data to chart") && !walk.contains("<svg"));
         // One run still has max, p99 and max in solved against y = x.
         assert!(chart_svg(&html, "chart-achieved").contains("shafts: p99"));
-        assert_eq!(html.matches("<svg").count(), 2);
+        // And its estimate chart.
+        assert!(chart_svg(&html, "chart-estimate-0").contains("y = x"));
+        assert_eq!(html.matches("<svg").count(), 3);
     }
 }

@@ -635,10 +635,11 @@ impl<'a> Page<'a> {
              <th>CPVs</th><th>candidates</th><th>impostors</th><th>memory (MB)</th>\
              <th>unsolved CPVs</th><th>preprocessing (s)</th><th>eval max (ms)</th>\
              <th>eval p99 (ms)</th><th>max in solved (ms)</th><th>violations in solved</th>\
+             <th>control: over the target with no impostor</th>\
              <th>parallax max (px)</th><th>status</th></tr>\n",
         );
         if self.r.runs.is_empty() {
-            h.push_str("<tr><td colspan=\"15\">No runs.</td></tr>\n");
+            h.push_str("<tr><td colspan=\"16\">No runs.</td></tr>\n");
         }
         for x in &self.r.runs {
             let e = x.eval.as_ref();
@@ -652,7 +653,7 @@ impl<'a> Page<'a> {
                 "<tr><td>{}</td><td>{}</td><td class=\"n\">{}</td><td class=\"n\">{}</td>\
                  <td class=\"n\">{}</td><td class=\"n\">{}</td><td class=\"n\">{:.3}</td>\
                  <td class=\"n{}\">{}</td><td class=\"n\">{:.3}</td><td class=\"n\">{}</td>\
-                 <td class=\"n\">{}</td><td class=\"n\">{}</td><td class=\"n{}\">{}</td>\
+                 <td class=\"n\">{}</td><td class=\"n\">{}</td><td class=\"n{}\">{}</td>{}\
                  <td class=\"n\">{}</td><td{}>{}</td></tr>",
                 esc(&x.method),
                 esc(&setting(x)),
@@ -669,6 +670,7 @@ impl<'a> Page<'a> {
                 ms(|e| e.max_ms_in_solved),
                 if bad_viol { " bad" } else { "" },
                 viol,
+                super::truth::control_cell(x),
                 e.and_then(|e| e.parallax_max_px)
                     .filter(|v| v.is_finite())
                     .map_or("–".to_string(), |v| format!("{v:.2}")),
@@ -682,7 +684,7 @@ impl<'a> Page<'a> {
             if let Some(err) = &x.error {
                 let _ = writeln!(
                     h,
-                    "<tr class=\"error\"><td></td><td colspan=\"14\">error: {}</td></tr>",
+                    "<tr class=\"error\"><td></td><td colspan=\"15\">error: {}</td></tr>",
                     esc(err)
                 );
             }
