@@ -52,8 +52,45 @@ fn a_report_compares_methods_over_a_target_sweep() {
         assert!(mem[0] >= mem[1] && mem[1] >= mem[2], "{m}: {mem:?}");
         assert!(mem[0] > mem[2], "{m}: {mem:?}");
     }
-    // One walkthrough per (method, swept target).
-    assert_eq!(r["walkthroughs"].as_array().unwrap().len(), 5 * 3);
+    // One walkthrough per (method, swept target), all on the same path: a
+    // tour through the problem (the job has no path), where frames break
+    // the tightest target without impostors. With a placement, a frame in a
+    // problem view never takes longer than its estimate, and frames over
+    // the target lie in unsolved problem views only (methods with a
+    // guarantee).
+    let walks = r["walkthroughs"].as_array().unwrap();
+    assert_eq!(walks.len(), 5 * 3);
+    let nums = |v: &serde_json::Value| -> Vec<Option<f64>> {
+        v.as_array().unwrap().iter().map(|x| x.as_f64()).collect()
+    };
+    let bare = nums(&walks[0]["bare_ms"]);
+    assert_eq!(bare.len(), 1000);
+    let over = bare.iter().filter(|b| b.unwrap() > 4.5).count();
+    assert!(over > 0, "the tour never exceeds 4.5 ms without impostors");
+    for w in walks {
+        assert_eq!(nums(&w["bare_ms"]), bare, "one path for every run");
+        let t = w["target_frame_time_ms"].as_f64().unwrap();
+        let frames = nums(&w["frame_ms"]);
+        let estimates = nums(&w["estimate_ms"]);
+        assert!(estimates.iter().any(Option::is_some), "{}", w["method"]);
+        for (f, e) in frames.iter().zip(&estimates) {
+            let f = f.unwrap();
+            if let Some(e) = e {
+                assert!(
+                    f <= e + 1e-9,
+                    "{} {t}: frame {f} ms over its estimate {e}",
+                    w["method"]
+                );
+            }
+            if w["method"] != "env-map" && f > t {
+                assert!(
+                    e.is_some_and(|e| e > t),
+                    "{} {t}: {f} ms in a solved view",
+                    w["method"]
+                );
+            }
+        }
+    }
     let html = std::fs::read_to_string(out.join("report.html")).unwrap();
     assert!(html.contains("<svg"), "charts are inline SVG");
     assert!(html.contains("env-map") && html.contains("per-cell"));

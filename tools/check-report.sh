@@ -4,9 +4,10 @@
 # errors and assertions, uncaught exceptions, failed loads, blocked content)
 # or requests anything but the file itself (a report is self-contained).
 # With a second argument, also writes a PNG screenshot of the top of the
-# page (1200 × 1600).
+# page (1200 × 1600), or with a third, of the element that CSS selector
+# picks (e.g. '#walkthrough figure', the first match, whole).
 #
-#   tools/check-report.sh REPORT.html [SCREENSHOT.png]
+#   tools/check-report.sh REPORT.html [SCREENSHOT.png [SELECTOR]]
 #
 # Chromium is driven over the DevTools protocol on a pipe
 # (--remote-debugging-pipe, no port), by the Python 3 below. When chromium
@@ -17,9 +18,10 @@ set -euo pipefail
 
 die() { echo "check-report: $*" >&2; exit 2; }
 
-[ $# -ge 1 ] && [ $# -le 2 ] || die "usage: $0 REPORT.html [SCREENSHOT.png]"
+[ $# -ge 1 ] && [ $# -le 3 ] || die "usage: $0 REPORT.html [SCREENSHOT.png [SELECTOR]]"
 page=$1
 shot=${2:-}
+selector=${3:-}
 [ -f "$page" ] || die "no such file: $page"
 
 if ! command -v chromium >/dev/null 2>&1; then
@@ -40,7 +42,7 @@ if [ -n "$shot" ]; then
     shot_abs=$(realpath -m "$shot")
 fi
 
-CHROMIUM=$(command -v chromium) PROFILE="$profile" URL="$url" SHOT="$shot_abs" \
+CHROMIUM=$(command -v chromium) PROFILE="$profile" URL="$url" SHOT="$shot_abs" SELECTOR="$selector" \
     timeout 180 python3 - <<'PY'
 import base64, json, os, select, subprocess, sys, time
 
@@ -168,9 +170,22 @@ for e in events:
         if not (req == url or req.startswith("data:") or req.startswith("about:")):
             problems.append("the page requested an external resource: " + req)
 
+selector = os.environ.get("SELECTOR", "")
+clip = {"x": 0, "y": 0, "width": 1200, "height": 1600, "scale": 1}
+if shot and selector:
+    box = call("Runtime.evaluate", {
+        "expression": "(() => { const e = document.querySelector(%s); if (!e) return null;"
+                      " const r = e.getBoundingClientRect();"
+                      " return JSON.stringify({x: r.left + scrollX, y: r.top + scrollY,"
+                      " width: r.width, height: r.height}); })()" % json.dumps(selector),
+        "returnByValue": True}, session=s).get("result", {}).get("value")
+    if not box:
+        problems.append("no element matches the selector " + selector)
+    else:
+        clip = dict(json.loads(box), scale=1)
 if shot:
-    png = call("Page.captureScreenshot", {"format": "png", "clip": {
-        "x": 0, "y": 0, "width": 1200, "height": 1600, "scale": 1}}, session=s)
+    png = call("Page.captureScreenshot", {"format": "png", "clip": clip,
+        "captureBeyondViewport": True}, session=s)
     with open(shot, "wb") as f:
         f.write(base64.b64decode(png["data"]))
 

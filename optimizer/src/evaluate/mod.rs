@@ -25,7 +25,7 @@ mod view_time;
 mod walkthrough;
 
 pub use parallax::parallax_check;
-pub use walkthrough::walkthrough_views;
+pub use walkthrough::{PathTimes, walkthrough_views};
 
 use rayon::prelude::*;
 

@@ -12,36 +12,34 @@ use crate::input::Prepared;
 use crate::math::geom::ViewFrustum;
 use crate::model::cost::CostModel;
 
-/// The views of a walkthrough: `frames` points evenly spaced along the
-/// job's path (or, without one, a closed loop through the view space at
-/// mid-height: an ellipse over 80 % of its extent), each looking along the
-/// path, level.
-pub fn walkthrough_views(job: &Job) -> Vec<(DVec3, DVec3)> {
-    let (lo, hi) = (job.vs_min(), job.vs_max());
-    let (points, frames): (Vec<DVec3>, u32) = match &job.walkthrough {
-        Some(w) => (
-            w.points.iter().map(|p| DVec3::from_array(*p)).collect(),
-            w.frames,
-        ),
-        None => {
-            let c = (lo + hi) * 0.5;
-            let r = (hi - lo) * 0.4;
-            let n = 256;
-            (
-                (0..=n)
-                    .map(|i| {
-                        let a = std::f64::consts::TAU * f64::from(i) / f64::from(n);
-                        DVec3::new(c.x + r.x * a.cos(), c.y, c.z + r.z * a.sin())
-                    })
-                    .collect(),
-                1000,
-            )
-        }
-    };
-    // Arc length along the polyline.
+/// A view: eye and unit direction.
+type View = (DVec3, DVec3);
+
+/// The views of the job's own walkthrough: `frames` points evenly spaced
+/// along its path, each looking along the path, level; `None` when the
+/// job has no path (see [`Prepared::walkthrough_times`], which then tours
+/// the problem).
+pub fn walkthrough_views(job: &Job) -> Option<Vec<View>> {
+    let w = job.walkthrough.as_ref()?;
+    let points: Vec<View> = w
+        .points
+        .iter()
+        .map(|p| (DVec3::from_array(*p), DVec3::ZERO))
+        .collect();
+    Some(resample(&points, w.frames, job.vs_min(), job.vs_max()))
+}
+
+/// `frames` views evenly spaced by arc length along the polyline of
+/// `points` (eye, direction), kept inside `[lo, hi]`. Each looks in the
+/// direction interpolated between its segment's ends, or along the path,
+/// level, where those give none.
+fn resample(points: &[View], frames: u32, lo: DVec3, hi: DVec3) -> Vec<View> {
+    if points.len() < 2 {
+        return Vec::new();
+    }
     let mut acc = vec![0.0];
     for w in points.windows(2) {
-        let l = acc.last().copied().unwrap_or(0.0) + w[0].distance(w[1]);
+        let l = acc.last().copied().unwrap_or(0.0) + w[0].0.distance(w[1].0);
         acc.push(l);
     }
     let total = acc.last().copied().unwrap_or(0.0);
@@ -54,9 +52,13 @@ pub fn walkthrough_views(job: &Job) -> Vec<(DVec3, DVec3)> {
                 .min(points.len() - 2);
             let seg = acc[k + 1] - acc[k];
             let t = if seg > 0.0 { (s - acc[k]) / seg } else { 0.0 };
-            let p = points[k].lerp(points[k + 1], t).clamp(lo, hi);
-            let mut dir = points[k + 1] - points[k];
-            dir.y = 0.0;
+            let (a, b) = (points[k], points[k + 1]);
+            let p = a.0.lerp(b.0, t).clamp(lo, hi);
+            let mut dir = a.1.lerp(b.1, t);
+            if dir.length_squared() < 1e-12 {
+                dir = b.0 - a.0;
+                dir.y = 0.0;
+            }
             if dir.length_squared() < 1e-18 {
                 dir = DVec3::X;
             }
@@ -65,44 +67,217 @@ pub fn walkthrough_views(job: &Job) -> Vec<(DVec3, DVec3)> {
         .collect()
 }
 
+/// Frame times along a walkthrough.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct PathTimes {
+    /// With the placement's impostors, ms.
+    pub frame_ms: Vec<f64>,
+    /// With no impostor, ms.
+    pub bare_ms: Vec<f64>,
+    /// The placement's estimate (with its impostors) for the problem view
+    /// each frame lies in, ms; `None` outside problem views.
+    pub estimate_ms: Vec<Option<f64>>,
+}
+
+/// Positions sampled for the problem tour, about.
+const TOUR_POSITIONS: f64 = 1024.0;
+/// Directions per position: yaws, at each of up to two pitches.
+const TOUR_YAWS: u32 = 16;
+/// The most waypoints of the tour.
+const TOUR_STOPS: usize = 8;
+/// Points of the spline per segment between two waypoints.
+const TOUR_SPLINE: u32 = 24;
+/// Frames of the tour.
+const TOUR_FRAMES: u32 = 1000;
+
+/// The uniform Catmull-Rom point at `t` of the segment `p1`–`p2`.
+fn catmull_rom(p0: DVec3, p1: DVec3, p2: DVec3, p3: DVec3, t: f64) -> DVec3 {
+    let (t2, t3) = (t * t, t * t * t);
+    0.5 * ((2.0 * p1)
+        + (p2 - p0) * t
+        + (2.0 * p0 - 5.0 * p1 + 4.0 * p2 - p3) * t2
+        + (3.0 * p1 - p0 - 3.0 * p2 + p3) * t3)
+}
+
 impl Prepared<'_> {
-    /// Frame time of each given view `(eye, direction)` with `placement`'s
-    /// impostors (the views' problem views' impostors swapped in) and the
-    /// visible sets of their cells: the frame-time curve of a walkthrough.
-    /// `source` names the placement in errors.
-    pub fn frame_times(
-        &self,
-        placement: &Placement,
-        views: &[(DVec3, DVec3)],
-        source: &str,
-    ) -> Result<Vec<f64>> {
+    /// The walkthrough of the placement's job and its frame times with the
+    /// placement, with no impostor, and as the placement estimates them.
+    /// The path is the job's own, or else a tour through the problem: the
+    /// positions (at mid-height, on a grid over the view space) whose
+    /// slowest direction without impostors is slowest, up to eight apart
+    /// from each other, visited nearest first from the slowest in a closed
+    /// Catmull-Rom loop, the camera turning to face each stop's slowest
+    /// direction as it passes. The tour depends on the scene and the job's
+    /// view space, visibility and camera only, not on the placement, so
+    /// every run of a report follows the same path.
+    pub fn walkthrough_times(&self, placement: &Placement, source: &str) -> Result<PathTimes> {
         let job = self.job();
         let scene = self.scene();
         let index = PlacementIndex::new(scene, job, placement, source)?;
         let model = CostModel::new(job);
         let [w, hgt] = job.camera.resolution;
         let aspect = f64::from(w) / f64::from(hgt);
-        Ok(views
+        let time = |(eye, dir): View, with: bool| -> (f64, Option<u32>) {
+            let f = ViewFrustum::new(eye, dir, job.camera.fov_deg, aspect);
+            let Some(cell) = index.grid.cell_of(eye) else {
+                return (f64::NAN, None);
+            };
+            let (cpv, replaced, imps) = if with {
+                index.view_cpv(eye, cell, dir)
+            } else {
+                (None, &[][..], &[][..])
+            };
+            let set = self.visibility().map(|v| &v.cell(cell).set);
+            let t = view_time(
+                scene,
+                self.hierarchy(),
+                &model,
+                &f,
+                replaced,
+                imps,
+                &index,
+                set.map(|s| &**s),
+                None,
+            );
+            (t, cpv)
+        };
+        let views = match walkthrough_views(job) {
+            Some(v) => v,
+            None => self.problem_tour(&|v| time(v, false).0),
+        };
+        if let Some(v) = self.visibility() {
+            let mut cells: Vec<[u32; 3]> = views
+                .iter()
+                .filter_map(|(eye, _)| index.grid.cell_of(*eye))
+                .collect();
+            cells.sort_unstable();
+            cells.dedup();
+            v.prefetch(&cells);
+        }
+        let rows: Vec<(f64, f64, Option<f64>)> = views
             .par_iter()
-            .map(|&(eye, dir)| {
-                let f = ViewFrustum::new(eye, dir, job.camera.fov_deg, aspect);
-                let Some(cell) = index.grid.cell_of(eye) else {
-                    return f64::NAN;
-                };
-                let (_, replaced, imps) = index.view_cpv(eye, cell, dir);
-                let set = self.visibility().map(|v| &v.cell(cell).set);
-                view_time(
-                    scene,
-                    self.hierarchy(),
-                    &model,
-                    &f,
-                    replaced,
-                    imps,
-                    &index,
-                    set.map(|s| &**s),
-                    None,
-                )
+            .map(|&v| {
+                let (with, cpv) = time(v, true);
+                let bare = time(v, false).0;
+                let estimate = cpv
+                    .and_then(|c| placement.cpvs.get(c as usize))
+                    .map(|c| c.time_ms_final);
+                (with, bare, estimate)
             })
-            .collect())
+            .collect();
+        Ok(PathTimes {
+            frame_ms: rows.iter().map(|r| r.0).collect(),
+            bare_ms: rows.iter().map(|r| r.1).collect(),
+            estimate_ms: rows.iter().map(|r| r.2).collect(),
+        })
+    }
+
+    /// The tour through the problem (see
+    /// [`walkthrough_times`](Self::walkthrough_times)), `bare` timing a view
+    /// with no impostor.
+    fn problem_tour(&self, bare: &(dyn Fn(View) -> f64 + Sync)) -> Vec<View> {
+        let job = self.job();
+        let (lo, hi) = (job.vs_min(), job.vs_max());
+        let size = hi - lo;
+        let ratio = (size.x.max(1e-9) / size.z.max(1e-9)).clamp(1.0 / 256.0, 256.0);
+        let nx = (TOUR_POSITIONS * ratio).sqrt().round().clamp(1.0, 256.0) as u32;
+        let nz = (TOUR_POSITIONS / f64::from(nx)).round().clamp(1.0, 256.0) as u32;
+        let y = (lo.y + hi.y) * 0.5;
+        let [p0, p1] = job.view_space.pitch_deg;
+        let level = 0.0f64.clamp(p0, p1);
+        let mut pitches = vec![level];
+        let mid = (p0 + p1) * 0.5;
+        if (mid - level).abs() > 10.0 {
+            pitches.push(mid);
+        }
+        let positions: Vec<DVec3> = (0..nz)
+            .flat_map(|k| {
+                (0..nx).map(move |i| {
+                    DVec3::new(
+                        lo.x + size.x * (f64::from(i) + 0.5) / f64::from(nx),
+                        y,
+                        lo.z + size.z * (f64::from(k) + 0.5) / f64::from(nz),
+                    )
+                })
+            })
+            .collect();
+        // Per position: its slowest direction and time.
+        let worst: Vec<(f64, DVec3)> = positions
+            .par_iter()
+            .map(|&eye| {
+                let mut best = (f64::NEG_INFINITY, DVec3::X);
+                for &pitch in &pitches {
+                    let (sp, cp) = pitch.to_radians().sin_cos();
+                    for k in 0..TOUR_YAWS {
+                        let yaw = std::f64::consts::TAU * f64::from(k) / f64::from(TOUR_YAWS);
+                        let dir = DVec3::new(cp * yaw.cos(), sp, cp * yaw.sin());
+                        let t = bare((eye, dir));
+                        if t > best.0 {
+                            best = (t, dir);
+                        }
+                    }
+                }
+                best
+            })
+            .collect();
+        let mut order: Vec<usize> = (0..positions.len()).collect();
+        order.sort_by(|&a, &b| worst[b].0.total_cmp(&worst[a].0).then(a.cmp(&b)));
+        let spacing = (size.x * size.x + size.z * size.z).sqrt() / TOUR_STOPS as f64;
+        let mut stops: Vec<usize> = Vec::new();
+        for i in order {
+            if stops.len() == TOUR_STOPS {
+                break;
+            }
+            if stops
+                .iter()
+                .all(|&s| positions[s].distance(positions[i]) >= spacing)
+            {
+                stops.push(i);
+            }
+        }
+        // Nearest first from the slowest.
+        let mut tour = vec![stops[0]];
+        let mut left: Vec<usize> = stops[1..].to_vec();
+        while !left.is_empty() {
+            let here = positions[*tour.last().expect("one stop")];
+            let (k, _) = left
+                .iter()
+                .enumerate()
+                .map(|(k, &s)| (k, positions[s].distance_squared(here)))
+                .min_by(|a, b| a.1.total_cmp(&b.1).then(a.0.cmp(&b.0)))
+                .expect("not empty");
+            tour.push(left.remove(k));
+        }
+        let n = tour.len();
+        let points: Vec<View> = if n == 1 {
+            // One stop: a small loop around it, facing its slowest way.
+            let c = positions[tour[0]];
+            let r = size * 0.1;
+            (0..=32)
+                .map(|i| {
+                    let a = std::f64::consts::TAU * f64::from(i) / 32.0;
+                    (
+                        DVec3::new(c.x + r.x * a.cos(), y, c.z + r.z * a.sin()),
+                        worst[tour[0]].1,
+                    )
+                })
+                .collect()
+        } else {
+            let at = |k: usize| positions[tour[k % n]];
+            let mut pts = Vec::new();
+            for k in 0..n {
+                let (d1, d2) = (worst[tour[k]].1, worst[tour[(k + 1) % n]].1);
+                for j in 0..TOUR_SPLINE {
+                    let t = f64::from(j) / f64::from(TOUR_SPLINE);
+                    let p = catmull_rom(at(k + n - 1), at(k), at(k + 1), at(k + 2), t);
+                    // Facing the stop's slowest way near it, turning between.
+                    let s = t * t * (3.0 - 2.0 * t);
+                    pts.push((p.clamp(lo, hi), d1.lerp(d2, s)));
+                }
+            }
+            pts.push((at(0), worst[tour[0]].1));
+            pts
+        };
+        resample(&points, TOUR_FRAMES, lo, hi)
     }
 }

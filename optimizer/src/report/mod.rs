@@ -232,6 +232,15 @@ pub struct Walkthrough {
     pub target_frame_time_ms: f64,
     /// Frame time of each frame along the path, ms.
     pub frame_ms: Vec<f64>,
+    /// The same frames with no impostor, ms (empty in reports of older
+    /// versions).
+    #[serde(default)]
+    pub bare_ms: Vec<f64>,
+    /// The placement's estimate for the problem view of each frame, ms
+    /// (with its impostors; `null` where the frame lies in no problem
+    /// view).
+    #[serde(default)]
+    pub estimate_ms: Vec<Option<f64>>,
 }
 
 /// Stability of each method under perturbed inputs.

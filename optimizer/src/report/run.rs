@@ -12,7 +12,7 @@ use super::{
 use crate::api::evaluation::Evaluation;
 use crate::api::job::{Job, Method};
 use crate::control::Control;
-use crate::evaluate::{EvalOptions, walkthrough_views};
+use crate::evaluate::{EvalOptions, PathTimes};
 use crate::input::{Prepared, SceneInput};
 use crate::place::{PlaceOptions, PlaceOutput};
 use crate::{Error, Result};
@@ -203,12 +203,14 @@ pub struct RunOutput {
     pub eval: Evaluation,
     /// The run as the report lists it.
     pub run: Run,
-    /// Frame times along the job's walkthrough.
-    pub frames: Option<Vec<f64>>,
+    /// Frame times along the walkthrough (the job's path, or a tour
+    /// through the problem).
+    pub frames: Option<PathTimes>,
 }
 
 /// Places `prepared`'s job with `opts`, evaluates the placement with `eval` and, with
-/// `walk`, follows the job's walkthrough.
+/// `walk`, follows the walkthrough (the job's path, or a tour through the
+/// problem).
 pub fn place_and_evaluate(
     prepared: &Prepared,
     opts: &PlaceOptions,
@@ -225,7 +227,7 @@ pub fn place_and_evaluate(
     ctl.progress("evaluate", 0.98, "evaluating the placement");
     let evaluation = prepared.evaluate(p, eval, "placement")?;
     let frames = if walk {
-        Some(prepared.frame_times(p, &walkthrough_views(job), "placement")?)
+        Some(prepared.walkthrough_times(p, "placement")?)
     } else {
         None
     };
@@ -282,7 +284,7 @@ fn one_run<'a>(
     job: &Job,
     views: u64,
     walk: bool,
-) -> Result<(Run, Option<Vec<f64>>)> {
+) -> Result<(Run, Option<PathTimes>)> {
     let prepared = preps.for_job(input, job)?;
     let eval = EvalOptions {
         views,
@@ -303,7 +305,7 @@ fn one_run<'a>(
 
 /// A run's outcome, with a refused or cancelled run recorded as failed
 /// (no frames); any other error stops the report.
-fn or_failed(job: &Job, r: Result<(Run, Option<Vec<f64>>)>) -> Result<(Run, Option<Vec<f64>>)> {
+fn or_failed(job: &Job, r: Result<(Run, Option<PathTimes>)>) -> Result<(Run, Option<PathTimes>)> {
     match r {
         Err(e @ (Error::BadInput { .. } | Error::Cancelled)) => Ok((failed(job, &e), None)),
         r => r,
@@ -397,11 +399,13 @@ pub fn run(
         let is_target = setting.as_ref().is_some_and(|(k, _)| k == TARGET);
         let walk = is_target || (!has_target_sweep && setting.is_none());
         let (mut run, frames) = or_failed(job, one_run(&mut preps, input, job, opts.views, walk))?;
-        if let Some(frame_ms) = frames {
+        if let Some(t) = frames {
             walkthroughs.push(Walkthrough {
                 method: job.method().name().into(),
                 target_frame_time_ms: job.target_frame_time_ms,
-                frame_ms,
+                frame_ms: t.frame_ms,
+                bare_ms: t.bare_ms,
+                estimate_ms: t.estimate_ms,
             });
         }
         if let Some((k, v)) = setting {
@@ -437,7 +441,7 @@ pub fn run(
             let mut j = base.clone();
             j.method = Some(m);
             let mut settings = Vec::new();
-            let mut record = |label: String, r: Result<(Run, Option<Vec<f64>>)>| {
+            let mut record = |label: String, r: Result<(Run, Option<PathTimes>)>| {
                 settings.push(match r {
                     Ok((run, _)) => Perturbed {
                         label,
@@ -548,10 +552,12 @@ pub fn single_run_report(
         walkthroughs: out
             .frames
             .iter()
-            .map(|frames| Walkthrough {
+            .map(|t| Walkthrough {
                 method: out.run.method.clone(),
                 target_frame_time_ms: out.run.target_frame_time_ms,
-                frame_ms: frames.clone(),
+                frame_ms: t.frame_ms.clone(),
+                bare_ms: t.bare_ms.clone(),
+                estimate_ms: t.estimate_ms.clone(),
             })
             .collect(),
         stability: None,

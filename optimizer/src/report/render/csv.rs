@@ -38,7 +38,9 @@ const RUNS_HEADER: [&str; 27] = [
 /// row per run: method, knob, value, status, error and every number; the
 /// evaluation's columns are empty when a run has none; `stage_seconds` is
 /// `stage=seconds` pairs joined by `;`), `walkthroughs.csv` (one row per
-/// frame: method, target, frame index, frame time) and, when the report has
+/// frame: method, target, frame index, frame time, the frame's time
+/// without impostors and the placement's estimate, empty outside problem
+/// views) and, when the report has
 /// a stability block, `stability.csv` (one row per method and
 /// perturbation). Every file starts with a header row, even when it has no
 /// data rows. Numbers are written in Rust's shortest round-trip form
@@ -114,7 +116,15 @@ fn walkthroughs_csv(r: &Report) -> String {
     let mut out = String::new();
     row(
         &mut out,
-        ["method", "target_frame_time_ms", "frame", "frame_ms"].map(String::from),
+        [
+            "method",
+            "target_frame_time_ms",
+            "frame",
+            "frame_ms",
+            "bare_ms",
+            "estimate_ms",
+        ]
+        .map(String::from),
     );
     for w in &r.walkthroughs {
         for (i, ms) in w.frame_ms.iter().enumerate() {
@@ -125,6 +135,13 @@ fn walkthroughs_csv(r: &Report) -> String {
                     w.target_frame_time_ms.to_string(),
                     i.to_string(),
                     ms.to_string(),
+                    w.bare_ms.get(i).map(|v| v.to_string()).unwrap_or_default(),
+                    w.estimate_ms
+                        .get(i)
+                        .copied()
+                        .flatten()
+                        .map(|v| v.to_string())
+                        .unwrap_or_default(),
                 ],
             );
         }

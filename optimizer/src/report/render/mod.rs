@@ -10,8 +10,9 @@
 //! - **Preprocessing time vs memory**: one chart per other knob (the
 //!   report's sweeps in order, then knobs found only in runs), from the runs
 //!   with that knob.
-//! - **Walkthrough**: one chart per method of `walkthroughs`, one line per
-//!   target.
+//! - **Walkthrough**: one panel per target of `walkthroughs`: the frames
+//!   without impostors, with each method's placement and as it estimates
+//!   them, and the target; lines that coincide are said so in the caption.
 //! - **Estimate against truth**: one scatter per method (its base run, else
 //!   its first run with estimates): each sampled problem view's estimate
 //!   against the largest exact time sampled in it; a table of every run's
@@ -26,6 +27,7 @@ mod chart;
 mod csv;
 mod sections;
 mod truth;
+mod walk;
 
 use std::fmt::Write as _;
 
@@ -505,7 +507,28 @@ mod tests {
         let walks = &files[1].1;
         let frames: usize = r.walkthroughs.iter().map(|w| w.frame_ms.len()).sum();
         assert_eq!(walks.lines().count(), frames + 1);
-        assert!(walks.contains("\r\nboxes,20,30,21\r\n"));
+        // Frame 30 of the boxes at 20 ms: 21 ms, 10 + 12·|sin 3| ms without
+        // impostors, no estimate (in no problem view).
+        let row: Vec<&str> = walks
+            .lines()
+            .find(|l| l.starts_with("boxes,20,30,"))
+            .unwrap()
+            .split(',')
+            .collect();
+        assert_eq!(row.len(), 6);
+        assert_eq!(row[3], "21");
+        let bare: f64 = row[4].parse().unwrap();
+        assert!(
+            (bare - (10.0 + 12.0 * 3f64.sin().abs())).abs() < 1e-12,
+            "{bare}"
+        );
+        assert_eq!(row[5], "");
+        let row = walks
+            .lines()
+            .find(|l| l.starts_with("boxes,20,15,"))
+            .unwrap();
+        // 10 + 12·|sin 1.5| = 21.97 ms without impostors: over 20, estimated 19.6.
+        assert!(row.ends_with(",19.6"), "{row}");
         let stab = &files[2].1;
         assert_eq!(stab.lines().count(), 9);
         assert!(stab.contains("\r\nboxes,target +5%,ok,8600000,86,0,19\r\n"));
@@ -573,9 +596,12 @@ mod tests {
             method: "shafts".into(),
             target_frame_time_ms: f64::NAN,
             frame_ms: vec![f64::INFINITY, f64::NAN],
+            ..Walkthrough::default()
         });
         for w in &mut r.walkthroughs {
             w.frame_ms.iter_mut().for_each(|v| *v = f64::NAN);
+            w.bare_ms.iter_mut().for_each(|v| *v = f64::INFINITY);
+            w.estimate_ms.iter_mut().for_each(|v| *v = Some(f64::NAN));
         }
         let html = render_html(&r);
         assert!(html.contains("No data to chart"));
@@ -592,6 +618,9 @@ mod tests {
         r.runs.truncate(1);
         r.walkthroughs.truncate(1);
         r.walkthroughs[0].frame_ms.truncate(1);
+        // (a report of an older version: no frames without impostors)
+        r.walkthroughs[0].bare_ms.clear();
+        r.walkthroughs[0].estimate_ms.clear();
         let html = render_html(&r);
         let memory = between(&html, "<figure id=\"chart-memory\">", "</figure>");
         assert!(memory.contains("No data to chart") && !memory.contains("<svg"));

@@ -1,6 +1,5 @@
 //! The sections of a report page: the charts (memory, achieved frame time,
-//! speed against accuracy, walkthroughs), the stability tables and the
-//! table of runs.
+//! speed against accuracy), the stability tables and the table of runs.
 
 use std::fmt::Write as _;
 
@@ -468,96 +467,6 @@ impl<'a> Page<'a> {
             h.push_str("</ul>\n");
         }
         self.left_out(h, runs, false, shown);
-    }
-
-    pub(super) fn walkthrough_charts(&self, h: &mut String) {
-        section_start(h, "walkthrough", "Frame time along the walkthrough");
-        let ws = &self.r.walkthroughs;
-        let mut targets: Vec<f64> = ws.iter().map(|w| w.target_frame_time_ms).collect();
-        targets.sort_by(f64::total_cmp);
-        targets.dedup();
-        let color = |t: f64| {
-            let i = targets.iter().position(|x| *x == t).unwrap_or(0);
-            PALETTE[i % PALETTE.len()]
-        };
-        let methods: Vec<&str> = self
-            .methods
-            .iter()
-            .copied()
-            .filter(|m| ws.iter().any(|w| w.method == *m))
-            .collect();
-        if methods.is_empty() {
-            h.push_str("<p class=\"nodata\">No data: the report has no walkthrough.</p>\n");
-        }
-        for (i, m) in methods.iter().enumerate() {
-            let mut mine: Vec<_> = ws.iter().filter(|w| w.method == *m).collect();
-            mine.sort_by(|a, b| a.target_frame_time_ms.total_cmp(&b.target_frame_time_ms));
-            let frames = mine.iter().map(|w| w.frame_ms.len()).max().unwrap_or(0);
-            let mut c = Chart {
-                id: format!("chart-walk-{i}"),
-                title: format!("Frame time along the walkthrough: {m}"),
-                desc: format!(
-                    "Frame time in ms at each frame of the walkthrough path for {m}, one line per target frame time, dashed lines at the targets."
-                ),
-                x_label: "frame index".into(),
-                y_label: "frame time (ms)".into(),
-                y_from_zero: true,
-                ..Chart::default()
-            };
-            let mut over = Vec::new();
-            for w in &mine {
-                let t = w.target_frame_time_ms;
-                let col = color(t);
-                let mut s = Series::new(
-                    format!("frames, target {t} ms"),
-                    col,
-                    Line::Solid,
-                    Marker::None,
-                );
-                s.points = w
-                    .frame_ms
-                    .iter()
-                    .enumerate()
-                    .map(|(f, ms)| (f as f64, *ms))
-                    .collect();
-                c.series.push(s);
-                let mut g = Series::new(format!("target {t} ms"), col, Line::Dashed, Marker::None);
-                g.points = vec![(0.0, t), (frames.saturating_sub(1).max(1) as f64, t)];
-                g.guide = true;
-                c.series.push(g);
-                let mut hot = Series::new("", INK, Line::None, Marker::Ring);
-                for (f, ms) in w.frame_ms.iter().enumerate().filter(|(_, ms)| **ms > t) {
-                    hot.points.push((f as f64, *ms));
-                    hot.tips
-                        .push(format!("frame {f}: {ms:.3} ms, over the {t} ms target"));
-                }
-                hot.guide = true;
-                if !hot.points.is_empty() {
-                    hot.name = format!("over {t} ms");
-                    c.series.push(hot);
-                }
-                let n = w.frame_ms.iter().filter(|ms| **ms > t).count();
-                let max = w.frame_ms.iter().copied().fold(f64::NEG_INFINITY, f64::max);
-                over.push(format!(
-                    "target {t} ms: {n} of {} frames over (max {})",
-                    w.frame_ms.len(),
-                    if max.is_finite() {
-                        format!("{max:.3} ms")
-                    } else {
-                        "n/a".into()
-                    }
-                ));
-            }
-            let cap = format!(
-                "Frame time of {} at each frame of the walkthrough path, one line per target \
-                 frame time; the dashed line of the same colour is the target, rings mark frames over \
-                 it. {}.",
-                esc(m),
-                esc(&over.join("; "))
-            );
-            figure(h, &c, &cap);
-        }
-        h.push_str("</section>\n");
     }
 
     pub(super) fn stability(&self, h: &mut String) {
