@@ -9,8 +9,9 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::time::Duration;
 
+use common::start;
 use serde_json::{Value, json};
-use server::{AppState, Config, run};
+use server::Config;
 
 mod common;
 
@@ -95,14 +96,6 @@ async fn uploads_stream_to_disk_and_refused_ones_leave_nothing() {
         tokio::time::sleep(Duration::from_millis(20)).await;
     }
     assert!(files(&dir.join("jobs")).is_empty());
-}
-
-async fn start(cfg: Config) -> SocketAddr {
-    let state = AppState::open(cfg).unwrap();
-    let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
-    let addr = listener.local_addr().unwrap();
-    tokio::spawn(run(listener, state, std::future::pending()));
-    addr
 }
 
 /// A request with `token` (when given); status, JSON body (or null) and

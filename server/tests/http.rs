@@ -4,8 +4,9 @@ use std::net::SocketAddr;
 use std::path::PathBuf;
 use std::time::{Duration, Instant};
 
+use common::start;
 use serde_json::{Value, json};
-use server::{AppState, Config, run};
+use server::Config;
 
 mod common;
 
@@ -43,14 +44,6 @@ fn temp_dir(name: &str) -> PathBuf {
     let d = std::env::temp_dir().join(format!("impostor-server-{name}-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&d);
     d
-}
-
-async fn start(cfg: Config) -> SocketAddr {
-    let state = AppState::open(cfg).unwrap();
-    let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
-    let addr = listener.local_addr().unwrap();
-    tokio::spawn(run(listener, state, std::future::pending()));
-    addr
 }
 
 async fn request(

@@ -23,6 +23,23 @@ use crate::error::ApiError;
 use crate::store::{self, Staged};
 use crate::{Access, AppState};
 
+/// The documented error answers `(status, description)` an extractor may
+/// give before its handler runs, each with the error body.
+fn error_responses(
+    ctx: &mut GenContext,
+    operation: &mut Operation,
+    codes: &[(u16, &str)],
+) -> Vec<(Option<StatusCode>, Response)> {
+    codes
+        .iter()
+        .filter_map(|&(code, description)| {
+            let mut r = ApiError::operation_response(ctx, operation)?;
+            r.description = description.into();
+            Some((Some(StatusCode::Code(code)), r))
+        })
+        .collect()
+}
+
 /// The name of the bearer-token security scheme in the OpenAPI document.
 pub(crate) const BEARER: &str = "bearer";
 
@@ -56,23 +73,20 @@ impl OperationInput for Caller {
         ctx: &mut GenContext,
         operation: &mut Operation,
     ) -> Vec<(Option<StatusCode>, Response)> {
-        [
-            (
-                401,
-                "no token, or one the server does not know (or has revoked)",
-            ),
-            (
-                429,
-                "over the tenant's rate limit (`Retry-After` says when to try again)",
-            ),
-        ]
-        .into_iter()
-        .filter_map(|(code, description)| {
-            let mut r = ApiError::operation_response(ctx, operation)?;
-            r.description = description.into();
-            Some((Some(StatusCode::Code(code)), r))
-        })
-        .collect()
+        error_responses(
+            ctx,
+            operation,
+            &[
+                (
+                    401,
+                    "no token, or one the server does not know (or has revoked)",
+                ),
+                (
+                    429,
+                    "over the tenant's rate limit (`Retry-After` says when to try again)",
+                ),
+            ],
+        )
     }
 }
 
@@ -363,20 +377,17 @@ impl OperationInput for Submission {
         ctx: &mut GenContext,
         operation: &mut Operation,
     ) -> Vec<(Option<StatusCode>, Response)> {
-        [
-            (
-                400,
-                "a malformed body: bad multipart or JSON, a missing or unknown part",
-            ),
-            (413, "the body is larger than the upload limit"),
-            (415, "neither multipart/form-data nor application/json"),
-        ]
-        .into_iter()
-        .filter_map(|(code, description)| {
-            let mut r = ApiError::operation_response(ctx, operation)?;
-            r.description = description.into();
-            Some((Some(StatusCode::Code(code)), r))
-        })
-        .collect()
+        error_responses(
+            ctx,
+            operation,
+            &[
+                (
+                    400,
+                    "a malformed body: bad multipart or JSON, a missing or unknown part",
+                ),
+                (413, "the body is larger than the upload limit"),
+                (415, "neither multipart/form-data nor application/json"),
+            ],
+        )
     }
 }

@@ -24,3 +24,14 @@ pub fn cli_placement(scene: &[u8], job: &[u8]) -> Vec<u8> {
         .unwrap();
     optimizer::to_json_bytes(&out.placement).unwrap()
 }
+
+/// Starts the service with `cfg` on a free loopback port, in this test's
+/// runtime; returns its address.
+#[allow(dead_code)] // the restart test runs the real binary instead
+pub async fn start(cfg: server::Config) -> std::net::SocketAddr {
+    let state = server::AppState::open(cfg).unwrap();
+    let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
+    let addr = listener.local_addr().unwrap();
+    tokio::spawn(server::run(listener, state, std::future::pending()));
+    addr
+}

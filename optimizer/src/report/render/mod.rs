@@ -9,7 +9,9 @@
 //!   `target_frame_time_ms`.
 //! - **Preprocessing time vs memory**: one chart per other knob (the
 //!   report's sweeps in order, then knobs found only in runs), from the runs
-//!   with that knob.
+//!   with that knob, each followed by its accuracy: worst evaluated frame
+//!   time against preprocessing time, with the Pareto front over time,
+//!   memory and worst frame time.
 //! - **Walkthrough**: one panel per target of `walkthroughs`: the frames
 //!   without impostors, with each method's placement and as it estimates
 //!   them, and the target; lines that coincide are said so in the caption.
@@ -23,6 +25,7 @@
 //! on an axis are left out of the charts and listed under them; every run
 //! is in the table. Memory is in MB (10⁶ bytes).
 
+mod accuracy;
 mod chart;
 mod csv;
 mod sections;
@@ -332,17 +335,19 @@ mod tests {
         assert!(html.starts_with("<!DOCTYPE html>"));
         assert_eq!(html.matches("<html").count(), 1);
         assert_eq!(html.matches("</html>").count(), 1);
-        // Memory, achieved, budget, two speed charts (cell size, budget),
-        // two walkthroughs (shafts, boxes), three estimate charts (one per
-        // method), stability.
-        assert_eq!(html.matches("<svg").count(), 11);
-        assert_eq!(html.matches("</svg>").count(), 11);
+        // Memory, achieved, budget, two speed charts (cell size, budget)
+        // each with its accuracy chart, two walkthroughs (targets 10 and
+        // 20 ms), three estimate charts (one per method), stability.
+        assert_eq!(html.matches("<svg").count(), 13);
+        assert_eq!(html.matches("</svg>").count(), 13);
         for id in [
             "chart-memory",
             "chart-achieved",
             "chart-budget",
             "chart-speed-0",
             "chart-speed-1",
+            "chart-accuracy-0",
+            "chart-accuracy-1",
             "chart-walk-0",
             "chart-walk-1",
             "chart-estimate-0",

@@ -1,5 +1,6 @@
 //! The sections of a report page: the charts (memory, achieved frame time,
-//! speed against accuracy), the stability tables and the table of runs.
+//! preprocessing time against memory), the stability tables and the table
+//! of runs.
 
 use std::fmt::Write as _;
 
@@ -354,7 +355,7 @@ impl<'a> Page<'a> {
         section_start(
             h,
             "speed",
-            "Preprocessing time vs memory (speed against accuracy)",
+            "Speed against accuracy: preprocessing time, memory and worst frame time",
         );
         let mut knobs: Vec<&str> = Vec::new();
         let all = self
@@ -379,6 +380,7 @@ impl<'a> Page<'a> {
                 .filter(|x| x.knob.as_deref() == Some(*k))
                 .collect();
             self.speed_chart(h, i, k, &runs);
+            self.accuracy_chart(h, i, k, &runs);
         }
         h.push_str("</section>\n");
     }
