@@ -122,16 +122,7 @@ async fn call(
 
 /// A small job over the generated city's summary.
 fn small_submission() -> Value {
-    let glb = optimizer::citygen::generate(&optimizer::citygen::CityParams {
-        seed: 1,
-        scale: 0.1,
-        lod: false,
-        ..Default::default()
-    })
-    .unwrap();
-    let summary = optimizer::scene::gltf_load::load_scene_bytes(&glb, "c")
-        .unwrap()
-        .summary();
+    let summary = common::city_summary(0.1);
     let job: Value = serde_json::from_slice(
         &std::fs::read(concat!(
             env!("CARGO_MANIFEST_DIR"),

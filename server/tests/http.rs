@@ -4,7 +4,7 @@ use std::net::SocketAddr;
 use std::path::PathBuf;
 use std::time::{Duration, Instant};
 
-use common::start;
+use common::{city, city_summary, start};
 use serde_json::{Value, json};
 use server::Config;
 
@@ -27,16 +27,6 @@ fn job_json() -> Vec<u8> {
         env!("CARGO_MANIFEST_DIR"),
         "/../fixtures/jobs/city-small.json"
     ))
-    .unwrap()
-}
-
-fn city(scale: f64) -> Vec<u8> {
-    optimizer::citygen::generate(&optimizer::citygen::CityParams {
-        seed: 1,
-        scale,
-        lod: false,
-        ..Default::default()
-    })
     .unwrap()
 }
 
@@ -73,16 +63,6 @@ async fn submit_json(addr: SocketAddr, body: &Value) -> (u16, Vec<u8>) {
 async fn get_json(addr: SocketAddr, path: &str) -> (u16, Value) {
     let (s, b) = request(addr, "GET", path, None, b"").await;
     (s, serde_json::from_slice(&b).unwrap_or(Value::Null))
-}
-
-/// The scene summary of the generated city at `scale`.
-fn city_summary(scale: f64) -> Value {
-    serde_json::to_value(
-        optimizer::scene::gltf_load::load_scene_bytes(&city(scale), "c")
-            .unwrap()
-            .summary(),
-    )
-    .unwrap()
 }
 
 /// Submits `job` over the generated city's summary at `scale`; asserts it

@@ -104,13 +104,7 @@ fn terminate(child: &mut Child) -> std::process::ExitStatus {
 /// job succeeds with the command line's placement bytes.
 fn stop_mid_job_and_restart(name: &str, stop: impl FnOnce(&mut Child)) {
     let (dir, addr) = fresh(name);
-    let glb = optimizer::citygen::generate(&optimizer::citygen::CityParams {
-        seed: 1,
-        scale: 0.1,
-        lod: false,
-        ..Default::default()
-    })
-    .unwrap();
+    let glb = common::city(0.1);
     let scene = optimizer::scene::gltf_load::load_scene_bytes(&glb, "c").unwrap();
     let job_bytes = std::fs::read(concat!(
         env!("CARGO_MANIFEST_DIR"),

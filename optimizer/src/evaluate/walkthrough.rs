@@ -117,10 +117,12 @@ impl Prepared<'_> {
         let model = CostModel::new(job);
         let [w, hgt] = job.camera.resolution;
         let aspect = f64::from(w) / f64::from(hgt);
-        let time = |(eye, dir): View, with: bool| -> (f64, Option<u32>) {
+        // A view's time (with its problem view's impostors when `with`),
+        // its problem view, and whether impostors were drawn.
+        let time = |(eye, dir): View, with: bool| -> (f64, Option<u32>, bool) {
             let f = ViewFrustum::new(eye, dir, job.camera.fov_deg, aspect);
             let Some(cell) = index.grid.cell_of(eye) else {
-                return (f64::NAN, None);
+                return (f64::NAN, None, false);
             };
             let (cpv, replaced, imps) = if with {
                 index.view_cpv(eye, cell, dir)
@@ -139,7 +141,7 @@ impl Prepared<'_> {
                 set.map(|s| &**s),
                 None,
             );
-            (t, cpv)
+            (t, cpv, !imps.is_empty())
         };
         let views = match walkthrough_views(job) {
             Some(v) => v,
@@ -157,8 +159,9 @@ impl Prepared<'_> {
         let rows: Vec<(f64, f64, Option<f64>)> = views
             .par_iter()
             .map(|&v| {
-                let (with, cpv) = time(v, true);
-                let bare = time(v, false).0;
+                let (with, cpv, drawn) = time(v, true);
+                // Without impostors drawn, the frame is its own control.
+                let bare = if drawn { time(v, false).0 } else { with };
                 let estimate = cpv
                     .and_then(|c| placement.cpvs.get(c as usize))
                     .map(|c| c.time_ms_final);

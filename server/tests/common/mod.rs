@@ -35,3 +35,26 @@ pub async fn start(cfg: server::Config) -> std::net::SocketAddr {
     tokio::spawn(server::run(listener, state, std::future::pending()));
     addr
 }
+
+/// The generated city (seed 1, no levels of detail) at `scale`, as a GLB.
+#[allow(dead_code)]
+pub fn city(scale: f64) -> Vec<u8> {
+    optimizer::citygen::generate(&optimizer::citygen::CityParams {
+        seed: 1,
+        scale,
+        lod: false,
+        ..Default::default()
+    })
+    .unwrap()
+}
+
+/// The scene summary of the generated city at `scale`.
+#[allow(dead_code)]
+pub fn city_summary(scale: f64) -> serde_json::Value {
+    serde_json::to_value(
+        optimizer::scene::gltf_load::load_scene_bytes(&city(scale), "c")
+            .unwrap()
+            .summary(),
+    )
+    .unwrap()
+}

@@ -2,8 +2,6 @@
 //! frame time against their preprocessing time, and the Pareto front over
 //! time, memory and worst frame time.
 
-use std::fmt::Write as _;
-
 use super::chart::{Chart, Line, Marker, Series, plottable};
 use super::*;
 
@@ -128,26 +126,23 @@ impl Page<'_> {
             esc(knob)
         );
         figure(h, &c, &cap);
-        if !front.is_empty() {
-            let _ = write!(
-                h,
-                "<p>Pareto front of <code>{}</code> over time, memory and worst frame time:</p>\
-                 <ul class=\"pareto\" id=\"pareto3-{index}\">",
+        pareto_list(
+            h,
+            &format!("pareto3-{index}"),
+            &format!(
+                "Pareto front of <code>{}</code> over time, memory and worst frame time",
                 esc(knob)
-            );
-            for x in &front {
-                let _ = write!(
-                    h,
-                    "<li>{} {}: {:.3} s, {:.3} MB, worst {:.3} ms</li>",
-                    esc(&x.method),
-                    esc(&setting(x)),
+            ),
+            &front,
+            |x| {
+                format!(
+                    "{:.3} s, {:.3} MB, worst {:.3} ms",
                     x.seconds,
                     mb(x.memory_bytes),
                     worst_ms(x).unwrap_or(f64::NAN)
-                );
-            }
-            h.push_str("</ul>\n");
-        }
+                )
+            },
+        );
     }
 }
 

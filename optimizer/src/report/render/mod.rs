@@ -255,6 +255,31 @@ impl<'a> Page<'a> {
     }
 }
 
+/// The list of the runs of a Pareto `front` (nothing when empty), under
+/// `heading` (HTML), one item per run: method, setting and `figures(run)`.
+fn pareto_list(
+    h: &mut String,
+    id: &str,
+    heading: &str,
+    front: &[&Run],
+    figures: impl Fn(&Run) -> String,
+) {
+    if front.is_empty() {
+        return;
+    }
+    let _ = write!(h, "<p>{heading}:</p><ul class=\"pareto\" id=\"{id}\">");
+    for x in front {
+        let _ = write!(
+            h,
+            "<li>{} {}: {}</li>",
+            esc(&x.method),
+            esc(&setting(x)),
+            figures(x)
+        );
+    }
+    h.push_str("</ul>\n");
+}
+
 /// Opens a page section.
 fn section_start(h: &mut String, id: &str, title: &str) {
     let _ = writeln!(h, "<section id=\"{id}\"><h2>{}</h2>", esc(title));

@@ -450,24 +450,13 @@ impl<'a> Page<'a> {
             esc(knob)
         );
         figure(h, &c, &cap);
-        if !front.is_empty() {
-            let _ = write!(
-                h,
-                "<p>Pareto front of <code>{}</code>:</p><ul class=\"pareto\" id=\"pareto-{index}\">",
-                esc(knob)
-            );
-            for x in &front {
-                let _ = write!(
-                    h,
-                    "<li>{} {}: {:.3} s, {:.3} MB</li>",
-                    esc(&x.method),
-                    esc(&setting(x)),
-                    x.seconds,
-                    mb(x.memory_bytes)
-                );
-            }
-            h.push_str("</ul>\n");
-        }
+        pareto_list(
+            h,
+            &format!("pareto-{index}"),
+            &format!("Pareto front of <code>{}</code>", esc(knob)),
+            &front,
+            |x| format!("{:.3} s, {:.3} MB", x.seconds, mb(x.memory_bytes)),
+        );
         self.left_out(h, runs, false, shown);
     }
 
