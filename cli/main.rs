@@ -66,13 +66,14 @@ struct MethodArg(Method);
 
 impl ValueEnum for MethodArg {
     fn value_variants<'a>() -> &'a [Self] {
-        const ALL: [MethodArg; 6] = [
+        const ALL: [MethodArg; 7] = [
             MethodArg(Method::ALL[0]),
             MethodArg(Method::ALL[1]),
             MethodArg(Method::ALL[2]),
             MethodArg(Method::ALL[3]),
             MethodArg(Method::ALL[4]),
             MethodArg(Method::ALL[5]),
+            MethodArg(Method::ALL[6]),
         ];
         &ALL
     }

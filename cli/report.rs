@@ -51,7 +51,10 @@ pub fn run(a: ReportArgs) -> Result<ExitCode> {
     let job_value: serde_json::Value = serde_json::from_slice(&text)
         .map_err(|e| Error::bad(&job_name, format!("invalid job JSON: {e}")))?;
     let methods = if a.methods.is_empty() {
-        Method::ALL.to_vec()
+        Method::ALL
+            .into_iter()
+            .filter(|m| m.in_default_report())
+            .collect()
     } else {
         a.methods.iter().map(|m| m.0).collect()
     };

@@ -159,3 +159,52 @@ fn outputs_go_through_links_and_into_pipes_without_replacing_them() {
     assert_eq!(bytes, std::fs::read(&target).unwrap());
     assert!(std::fs::metadata(&fifo).unwrap().file_type().is_fifo());
 }
+
+/// The exact method on a small instance: proven optimal, never more memory
+/// than the greedy it starts from (whose figure is the shafts placement's),
+/// the guarantee kept where the same views without impostors break it, and
+/// the same bytes for any thread count.
+#[test]
+fn exact_is_optimal_and_never_above_the_greedy() {
+    let dir = tmp("exact");
+    let city = city("0.25");
+    let job = root().join("fixtures/jobs/city-quarter-exact.json");
+    let (x, g, st) = (
+        dir.join("exact.json"),
+        dir.join("greedy.json"),
+        dir.join("stats.json"),
+    );
+    let o = place(&city, &job, &x, &["--stats", s(&st), "--threads", "2"]);
+    assert!(matches!(code(&o), 0 | 3), "{}", stderr(&o));
+    let o = place(&city, &job, &g, &["--method", "shafts"]);
+    assert!(matches!(code(&o), 0 | 3), "{}", stderr(&o));
+    let exact = &read_json(&st)["exact"];
+    assert_eq!(exact["status"], "optimal", "{exact}");
+    let mem = |p: &std::path::Path| read_json(p)["summary"]["memory_bytes"].as_u64().unwrap();
+    assert_eq!(exact["memory_bytes"].as_u64(), Some(mem(&x)), "{exact}");
+    assert_eq!(
+        exact["greedy_memory_bytes"].as_u64(),
+        Some(mem(&g)),
+        "{exact}"
+    );
+    assert_eq!(
+        exact["lower_bound_bytes"].as_u64(),
+        Some(mem(&x)),
+        "{exact}"
+    );
+    assert!(
+        mem(&x) > 0 && mem(&x) <= mem(&g),
+        "{} vs {}",
+        mem(&x),
+        mem(&g)
+    );
+    assert_eq!(
+        read_json(&x)["summary"]["unsolved_cpvs"],
+        read_json(&g)["summary"]["unsolved_cpvs"]
+    );
+    check_guarantee(&city, &job, &x, 2000, 0.01, &[]);
+    let one = dir.join("exact-1.json");
+    let o = place(&city, &job, &one, &["--threads", "1"]);
+    assert!(matches!(code(&o), 0 | 3), "{}", stderr(&o));
+    assert_same_file(&x, &one);
+}

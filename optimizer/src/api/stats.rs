@@ -90,6 +90,36 @@ pub struct Stats {
     /// Levels of detail (absent when no object has any).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub lod: Option<LodStats>,
+    /// The `exact` method's program (absent for other methods).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub exact: Option<ExactStats>,
+}
+
+/// The `exact` method's integer program and how far the greedy is from it.
+#[derive(Clone, Debug, Default, Serialize, Deserialize, JsonSchema)]
+pub struct ExactStats {
+    /// `optimal` (proven), or the limit that stopped the solver with the
+    /// best selection found: `node_limit` (`exact.max_nodes`),
+    /// `time_limit` (`exact.max_seconds`), `gap_limit`.
+    pub status: String,
+    /// Binary variables: candidates and useful (candidate, CPV) pairs.
+    pub variables: u64,
+    /// Constraints.
+    pub constraints: u64,
+    /// Branch-and-bound nodes solved.
+    pub nodes: u64,
+    /// Solver wall time, seconds.
+    pub seconds: f64,
+    /// Memory of the exact selection, bytes.
+    pub memory_bytes: u64,
+    /// Memory of the greedy's selection (of the same candidates), bytes.
+    pub greedy_memory_bytes: u64,
+    /// The best proven lower bound on the optimum's memory, bytes (equal to
+    /// `memory_bytes` when optimal; absent when the solver proved none).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub lower_bound_bytes: Option<u64>,
+    /// `greedy_memory_bytes / memory_bytes` (1 when both are 0).
+    pub greedy_over_exact: f64,
 }
 
 /// Levels of detail in a run.

@@ -198,6 +198,18 @@ impl Prepared<'_> {
             greedy::prune(ctx, pv, &cands, &mut sel);
             st.end("prune");
         }
+        let mut exact = None;
+        if method == Method::Exact {
+            st.begin(
+                "exact",
+                0.96,
+                "solving the exact program from the greedy's selection",
+            );
+            let (s, x) = crate::methods::exact::select(ctx, job, pv, &cands, &sel)?;
+            (sel, exact) = (s, Some(x));
+            st.end("exact");
+            ctl.check()?;
+        }
 
         st.begin("placement", 0.97, "writing the placement");
         let placement = build_placement(ctx, job, pv, &cands, &sel);
@@ -215,6 +227,7 @@ impl Prepared<'_> {
             evaluations_per_choice: sel.evaluations as f64 / sel.accepted.max(1) as f64,
             predicted_peak_bytes: predicted,
             pruned: sel.pruned,
+            exact,
             ..self.run_stats(ctx, counters, pv, &placement, std::mem::take(&mut st.times))
         };
         Ok((placement, stats))
@@ -548,7 +561,10 @@ mod tests {
         let scene = synthetic_city(3, 5, 5);
         let base = synthetic_job(5, 5);
         let mut memory = Vec::new();
-        for m in Method::ALL {
+        // `exact`'s program outgrows this city's whole view space: it is
+        // checked on a small part of a city end to end (the CLI tests) and
+        // against brute force (`methods::exact`).
+        for m in Method::ALL.into_iter().filter(|&m| m != Method::Exact) {
             let mut job = base.clone();
             job.method = Some(m);
             job.env_map.far_m = 60.0;

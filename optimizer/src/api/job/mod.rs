@@ -8,7 +8,10 @@ use serde::{Deserialize, Serialize};
 
 use crate::math::grid::Grid;
 
+mod methods;
 mod validate;
+
+pub use methods::{EnvMapParams, ExactParams, Method, PerCellParams};
 
 /// A placement job.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
@@ -57,104 +60,13 @@ pub struct Job {
     /// The `env-map` method's knobs.
     #[serde(default)]
     pub env_map: EnvMapParams,
+    /// The `exact` method's knobs.
+    #[serde(default)]
+    pub exact: ExactParams,
     /// A walkthrough path for frame-time plots (`impostor report`); default:
     /// a loop through the view space.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub walkthrough: Option<WalkthroughParams>,
-}
-
-/// A placement method (DESIGN §2.11): every method writes the same
-/// placement JSON and is judged by the same evaluation, cost and memory
-/// model.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, JsonSchema)]
-pub enum Method {
-    /// The paper's reference: shaft view cells around each cluster.
-    #[serde(rename = "shafts")]
-    Shafts,
-    /// Box view cells from the 3D view space hierarchy (paper test 13).
-    #[serde(rename = "boxes")]
-    Boxes,
-    /// Shafts and boxes.
-    #[serde(rename = "both")]
-    Both,
-    /// Box view cells of one size only (the grid cells, or their ancestors
-    /// `per_cell.level` levels up): one placement per cell, no sharing
-    /// between cells (paper test 14).
-    #[serde(rename = "per-cell")]
-    PerCell,
-    /// Per view cell, everything visible beyond `env_map.far_m` becomes
-    /// layered environment-map impostors (paper test 15); no frame-time
-    /// guarantee.
-    #[serde(rename = "env-map")]
-    EnvMap,
-    /// Shafts, then the pruning pass that removes impostors not needed to
-    /// keep every problem view within the target.
-    #[serde(rename = "shafts+prune")]
-    ShaftsPrune,
-}
-
-impl Method {
-    /// Every method, in the order reports list them.
-    pub const ALL: [Method; 6] = [
-        Method::Shafts,
-        Method::Boxes,
-        Method::Both,
-        Method::PerCell,
-        Method::EnvMap,
-        Method::ShaftsPrune,
-    ];
-
-    /// The method's name as in JSON and on the command line.
-    pub fn name(self) -> &'static str {
-        match self {
-            Method::Shafts => "shafts",
-            Method::Boxes => "boxes",
-            Method::Both => "both",
-            Method::PerCell => "per-cell",
-            Method::EnvMap => "env-map",
-            Method::ShaftsPrune => "shafts+prune",
-        }
-    }
-
-    /// Whether the method's candidates include shafts.
-    pub fn builds_shafts(self) -> bool {
-        matches!(self, Method::Shafts | Method::Both | Method::ShaftsPrune)
-    }
-
-    /// Whether the method's candidates include boxes of the view-space
-    /// hierarchy (`per-cell`: its one box level).
-    pub fn builds_boxes(self) -> bool {
-        matches!(self, Method::Boxes | Method::Both | Method::PerCell)
-    }
-
-    /// The method of a name.
-    pub fn parse(name: &str) -> Option<Method> {
-        Method::ALL.into_iter().find(|m| m.name() == name)
-    }
-}
-
-/// The `per-cell` method's knobs.
-#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize, JsonSchema)]
-#[serde(deny_unknown_fields)]
-pub struct PerCellParams {
-    /// View cells are the grid cells' kd ancestors this many levels up (0:
-    /// the cells themselves; each level up doubles a cell). Default 0.
-    #[serde(default)]
-    pub level: u32,
-}
-
-/// The `env-map` method's knobs.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
-#[serde(deny_unknown_fields)]
-pub struct EnvMapParams {
-    /// Side of a view cell, metres, rounded to a whole number of grid cells.
-    /// Default 25.
-    #[serde(default = "default_env_cell")]
-    pub cell_m: f64,
-    /// Objects entirely beyond this distance from a view cell become its
-    /// environment map. Default 300.
-    #[serde(default = "default_env_far")]
-    pub far_m: f64,
 }
 
 /// A walkthrough path.
@@ -534,12 +446,6 @@ fn default_probes() -> u32 {
 fn default_region_cells() -> u32 {
     16
 }
-fn default_env_cell() -> f64 {
-    25.0
-}
-fn default_env_far() -> f64 {
-    300.0
-}
 fn default_frames() -> u32 {
     1000
 }
@@ -624,15 +530,6 @@ impl Default for VisibilityParams {
     }
 }
 
-impl Default for EnvMapParams {
-    fn default() -> Self {
-        EnvMapParams {
-            cell_m: default_env_cell(),
-            far_m: default_env_far(),
-        }
-    }
-}
-
 impl Default for LodParams {
     fn default() -> Self {
         LodParams {
@@ -670,6 +567,7 @@ impl Job {
             method: None,
             per_cell: PerCellParams::default(),
             env_map: EnvMapParams::default(),
+            exact: ExactParams::default(),
             walkthrough: None,
         }
     }

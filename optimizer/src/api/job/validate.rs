@@ -287,6 +287,25 @@ impl Job {
                 format!("{} must be a positive number of metres", e.far_m),
             ));
         }
+        let x = &self.exact;
+        if !(1..=100_000_000).contains(&x.max_nodes) {
+            return Err(bad(
+                "exact.max_nodes",
+                format!("{} must be between 1 and 100000000", x.max_nodes),
+            ));
+        }
+        if !(x.max_seconds.is_finite() && x.max_seconds > 0.0 && x.max_seconds <= 1e6) {
+            return Err(bad(
+                "exact.max_seconds",
+                format!("{} must be a positive number of seconds", x.max_seconds),
+            ));
+        }
+        if !(1..=100_000_000).contains(&x.max_variables) {
+            return Err(bad(
+                "exact.max_variables",
+                format!("{} must be between 1 and 100000000", x.max_variables),
+            ));
+        }
         if let Some(w) = &self.walkthrough {
             if w.points.len() < 2 || w.points.len() > 100_000 {
                 return Err(bad(

@@ -1,0 +1,170 @@
+//! The placement methods and the knobs of those that have their own.
+
+use schemars::JsonSchema;
+use serde::{Deserialize, Serialize};
+
+/// A placement method (DESIGN §2.11): every method writes the same
+/// placement JSON and is judged by the same evaluation, cost and memory
+/// model.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, JsonSchema)]
+pub enum Method {
+    /// The paper's reference: shaft view cells around each cluster.
+    #[serde(rename = "shafts")]
+    Shafts,
+    /// Box view cells from the 3D view space hierarchy (paper test 13).
+    #[serde(rename = "boxes")]
+    Boxes,
+    /// Shafts and boxes.
+    #[serde(rename = "both")]
+    Both,
+    /// Box view cells of one size only (the grid cells, or their ancestors
+    /// `per_cell.level` levels up): one placement per cell, no sharing
+    /// between cells (paper test 14).
+    #[serde(rename = "per-cell")]
+    PerCell,
+    /// Per view cell, everything visible beyond `env_map.far_m` becomes
+    /// layered environment-map impostors (paper test 15); no frame-time
+    /// guarantee.
+    #[serde(rename = "env-map")]
+    EnvMap,
+    /// Shafts, then the pruning pass that removes impostors not needed to
+    /// keep every problem view within the target.
+    #[serde(rename = "shafts+prune")]
+    ShaftsPrune,
+    /// The optimum of the shafts' problem (every problem view within the
+    /// target, least memory) as an integer program, seeded with the
+    /// greedy's selection; for small instances (`exact`'s limits).
+    #[serde(rename = "exact")]
+    Exact,
+}
+
+impl Method {
+    /// Every method, in the order reports list them.
+    pub const ALL: [Method; 7] = [
+        Method::Shafts,
+        Method::Boxes,
+        Method::Both,
+        Method::PerCell,
+        Method::EnvMap,
+        Method::ShaftsPrune,
+        Method::Exact,
+    ];
+
+    /// The method's name as in JSON and on the command line.
+    pub fn name(self) -> &'static str {
+        match self {
+            Method::Shafts => "shafts",
+            Method::Boxes => "boxes",
+            Method::Both => "both",
+            Method::PerCell => "per-cell",
+            Method::EnvMap => "env-map",
+            Method::ShaftsPrune => "shafts+prune",
+            Method::Exact => "exact",
+        }
+    }
+
+    /// Whether the method's candidates include shafts.
+    pub fn builds_shafts(self) -> bool {
+        matches!(
+            self,
+            Method::Shafts | Method::Both | Method::ShaftsPrune | Method::Exact
+        )
+    }
+
+    /// Whether the method's candidates include boxes of the view-space
+    /// hierarchy (`per-cell`: its one box level).
+    pub fn builds_boxes(self) -> bool {
+        matches!(self, Method::Boxes | Method::Both | Method::PerCell)
+    }
+
+    /// Whether `impostor report` runs the method when none are named: all
+    /// but `exact`, whose program outgrows all but small instances.
+    pub fn in_default_report(self) -> bool {
+        self != Method::Exact
+    }
+
+    /// The method of a name.
+    pub fn parse(name: &str) -> Option<Method> {
+        Method::ALL.into_iter().find(|m| m.name() == name)
+    }
+}
+
+/// The `per-cell` method's knobs.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct PerCellParams {
+    /// View cells are the grid cells' kd ancestors this many levels up (0:
+    /// the cells themselves; each level up doubles a cell). Default 0.
+    #[serde(default)]
+    pub level: u32,
+}
+
+/// The `env-map` method's knobs.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct EnvMapParams {
+    /// Side of a view cell, metres, rounded to a whole number of grid cells.
+    /// Default 25.
+    #[serde(default = "default_env_cell")]
+    pub cell_m: f64,
+    /// Objects entirely beyond this distance from a view cell become its
+    /// environment map. Default 300.
+    #[serde(default = "default_env_far")]
+    pub far_m: f64,
+}
+
+impl Default for EnvMapParams {
+    fn default() -> Self {
+        EnvMapParams {
+            cell_m: default_env_cell(),
+            far_m: default_env_far(),
+        }
+    }
+}
+
+fn default_env_cell() -> f64 {
+    25.0
+}
+fn default_env_far() -> f64 {
+    300.0
+}
+
+/// The `exact` method's knobs: the size of program it takes on and when the
+/// solver stops (keeping the best selection found and its lower bound).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct ExactParams {
+    /// Branch-and-bound nodes before the solver stops (deterministic).
+    /// Default 20000.
+    #[serde(default = "default_exact_nodes")]
+    pub max_nodes: u64,
+    /// Wall time before the solver stops, seconds (a run it stops depends
+    /// on the machine). Default 300.
+    #[serde(default = "default_exact_seconds")]
+    pub max_seconds: f64,
+    /// Largest program taken on, in variables (one per candidate and one
+    /// per useful (candidate, problem view) pair); a larger one is refused
+    /// before it is built. Default 200000.
+    #[serde(default = "default_exact_variables")]
+    pub max_variables: u64,
+}
+
+impl Default for ExactParams {
+    fn default() -> Self {
+        ExactParams {
+            max_nodes: default_exact_nodes(),
+            max_seconds: default_exact_seconds(),
+            max_variables: default_exact_variables(),
+        }
+    }
+}
+
+fn default_exact_nodes() -> u64 {
+    20_000
+}
+fn default_exact_seconds() -> f64 {
+    300.0
+}
+fn default_exact_variables() -> u64 {
+    200_000
+}
