@@ -335,3 +335,45 @@ fn bad_report_arguments_are_named() {
     assert_eq!(code(&o), 2);
     assert!(stderr(&o).contains("shafts+prune"), "{}", stderr(&o));
 }
+
+/// A report with the exact method beside the greedy tables the gap: the
+/// exact run's memory is the optimum, the greedy's figure is the shafts
+/// run's memory, and the ratio is theirs.
+#[test]
+fn a_report_with_exact_tables_the_greedys_gap() {
+    let dir = tmp("report-exact");
+    let city = city("0.25");
+    let out = dir.join("r");
+    let job = root().join("fixtures/jobs/city-quarter-exact.json");
+    let o = run(&[
+        "report",
+        s(&city),
+        "--job",
+        s(&job),
+        "--methods",
+        "shafts,exact",
+        "--views",
+        "500",
+        "-o",
+        s(&out),
+    ]);
+    assert_eq!(code(&o), 0, "{}", stderr(&o));
+    let r = read_json(&out.join("report.json"));
+    let runs = r["runs"].as_array().unwrap();
+    let of = |m: &str| runs.iter().find(|x| x["method"] == m).unwrap();
+    let (greedy, exact) = (of("shafts"), of("exact"));
+    assert!(greedy.get("exact").is_none(), "{greedy}");
+    let x = &exact["exact"];
+    assert_eq!(x["status"], "optimal", "{x}");
+    assert_eq!(x["greedy_memory_bytes"], greedy["memory_bytes"], "{x}");
+    assert_eq!(x["memory_bytes"], exact["memory_bytes"], "{x}");
+    let ratio = x["greedy_over_exact"].as_f64().unwrap();
+    let mem = |r: &serde_json::Value| r["memory_bytes"].as_f64().unwrap();
+    assert!((ratio - mem(greedy) / mem(exact)).abs() < 1e-12 && ratio >= 1.0);
+    let html = std::fs::read_to_string(out.join("report.html")).unwrap();
+    assert!(html.contains("The greedy against the exact optimum"));
+    assert!(
+        html.contains(&format!("{ratio:.3}")),
+        "ratio {ratio:.3} not shown"
+    );
+}

@@ -191,6 +191,7 @@ pub fn sample_report() -> crate::report::Report {
                         .collect(),
                 }),
             }),
+            exact: None,
         }
     };
     let mut runs = Vec::new();

@@ -96,7 +96,7 @@ pub struct Stats {
 }
 
 /// The `exact` method's integer program and how far the greedy is from it.
-#[derive(Clone, Debug, Default, Serialize, Deserialize, JsonSchema)]
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize, JsonSchema)]
 pub struct ExactStats {
     /// `optimal` (proven), or the limit that stopped the solver with the
     /// best selection found: `node_limit` (`exact.max_nodes`),

@@ -107,7 +107,7 @@ impl RunStatus {
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize, JsonSchema)]
 pub struct Run {
     /// The method (`shafts`, `boxes`, `both`, `per-cell`, `env-map`,
-    /// `shafts+prune`).
+    /// `shafts+prune`, `exact`).
     pub method: String,
     /// The swept knob of this run, or `None` for the base job.
     pub knob: Option<String>,
@@ -144,6 +144,10 @@ pub struct Run {
     /// The evaluation (absent when the run failed).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub eval: Option<EvalSummary>,
+    /// The `exact` method's program: how it ended, its memory against the
+    /// greedy's, its lower bound (absent for other methods).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub exact: Option<crate::api::stats::ExactStats>,
 }
 
 /// The independent evaluation of one run.

@@ -248,6 +248,7 @@ pub fn place_and_evaluate(
         seconds,
         stage_seconds: out.stats.seconds.clone(),
         eval: Some(EvalSummary::from(&evaluation)),
+        exact: out.stats.exact.clone(),
     };
     Ok(RunOutput {
         place: out,

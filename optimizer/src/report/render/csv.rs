@@ -4,7 +4,7 @@
 use crate::report::{Report, Run};
 
 /// Header of `runs.csv`.
-const RUNS_HEADER: [&str; 27] = [
+const RUNS_HEADER: [&str; 30] = [
     "method",
     "knob",
     "value",
@@ -32,6 +32,9 @@ const RUNS_HEADER: [&str; 27] = [
     "eval_control_violations",
     "eval_estimate_ratio_median",
     "eval_estimate_ratio_final_median",
+    "exact_status",
+    "exact_greedy_memory_bytes",
+    "exact_lower_bound_bytes",
 ];
 
 /// The report's data as CSV files, `(file name, contents)`: `runs.csv` (one
@@ -105,6 +108,16 @@ fn runs_csv(runs: &[Run]) -> String {
                     .unwrap_or_default(),
             ]),
             None => fields.extend(std::iter::repeat_n(String::new(), 12)),
+        }
+        match &run.exact {
+            Some(x) => fields.extend([
+                x.status.clone(),
+                x.greedy_memory_bytes.to_string(),
+                x.lower_bound_bytes
+                    .map(|b| b.to_string())
+                    .unwrap_or_default(),
+            ]),
+            None => fields.extend(std::iter::repeat_n(String::new(), 3)),
         }
         row(&mut out, fields);
     }

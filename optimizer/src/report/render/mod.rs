@@ -20,6 +20,9 @@
 //!   against the largest exact time sampled in it; a table of every run's
 //!   ratios and control (views over the target with no impostor; a run
 //!   whose control is 0 is flagged: its check could not have failed).
+//! - **The greedy against the exact optimum** (only with `exact` runs): a
+//!   table of each such run's solver outcome, the greedy's memory, the
+//!   optimum's (or the best found and its lower bound) and their ratio.
 //!
 //! Failed runs (status other than `ok`) and values that cannot be placed
 //! on an axis are left out of the charts and listed under them; every run
@@ -94,6 +97,7 @@ pub fn render_html(r: &Report) -> String {
     p.speed_charts(&mut h);
     p.walkthrough_charts(&mut h);
     p.estimate_charts(&mut h);
+    p.exact_table(&mut h);
     p.stability(&mut h);
     p.runs_table(&mut h);
     h.push_str("</body>\n</html>\n");
@@ -595,6 +599,40 @@ mod tests {
             .retain(|x| x.knob.as_deref() != Some(BUDGET_KNOB));
         let html = render_html(&plain);
         assert!(!html.contains("chart-budget") && !html.contains("#budget"));
+    }
+
+    #[test]
+    fn exact_runs_get_the_gap_table_and_others_none() {
+        let r = sample_report();
+        assert!(!render_html(&r).contains("id=\"exact\""));
+        let mut with = sample_report();
+        let mut run = with.runs[0].clone();
+        run.method = "exact".into();
+        run.exact = Some(crate::api::stats::ExactStats {
+            status: "node_limit".into(),
+            nodes: 20_000,
+            seconds: 12.5,
+            memory_bytes: 700_000,
+            greedy_memory_bytes: 770_000,
+            lower_bound_bytes: Some(650_000),
+            greedy_over_exact: 1.1,
+            ..Default::default()
+        });
+        with.runs.push(run);
+        let html = render_html(&with);
+        let table = between(&html, "id=\"exact\"", "</table>");
+        assert_eq!(table.matches("<tr>").count(), 2, "{table}");
+        for want in ["node_limit", "0.7700", "0.7000", "0.6500", "1.100"] {
+            assert!(table.contains(want), "{want}: {table}");
+        }
+        let csv = csv::csv_files(&with).remove(0).1;
+        assert!(
+            csv.lines()
+                .last()
+                .unwrap()
+                .ends_with(",node_limit,770000,650000"),
+            "{csv}"
+        );
     }
 
     #[test]
