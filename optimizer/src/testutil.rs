@@ -56,6 +56,17 @@ pub fn synthetic_job(nx: u32, nz: u32) -> Job {
     job
 }
 
+/// [`synthetic_job`] with costs combined by `combine`; counting primitives
+/// alone, its target leaves problem views (40,000 triangles over the frame).
+pub fn synthetic_job_combined(nx: u32, nz: u32, combine: crate::api::job::Combine) -> Job {
+    let mut job = synthetic_job(nx, nz);
+    job.cost_model.combine = combine;
+    if combine == crate::api::job::Combine::Primitives {
+        job.target_frame_time_ms = 1.0 + 0.5e-6 * 40_000.0;
+    }
+    job
+}
+
 /// The geometry of a scene whose objects are solid boxes: each object is a
 /// closed, outward-facing cuboid filling its bounds (one mesh per object,
 /// one opaque single-sided material).

@@ -668,7 +668,7 @@ mod tests {
     use super::*;
     use crate::control::Control;
     use crate::scene::hierarchy::Hierarchy;
-    use crate::testutil::{synthetic_city, synthetic_job};
+    use crate::testutil::{synthetic_city, synthetic_job, synthetic_job_combined};
     use crate::views;
     use crate::views::Counters;
 
@@ -730,11 +730,7 @@ mod tests {
         use crate::api::job::Combine;
         for combine in [Combine::Sum, Combine::Max, Combine::Primitives] {
             let scene = synthetic_city(3, 5, 5);
-            let mut job = synthetic_job(5, 5);
-            job.cost_model.combine = combine;
-            if combine == Combine::Primitives {
-                job.target_frame_time_ms = 1.0 + 0.5e-6 * 40_000.0;
-            }
+            let job = synthetic_job_combined(5, 5, combine);
             let h = Hierarchy::build(&scene);
             let ctx = Context::new(&scene, &h, None, &job, Control::default());
             let pv = views::approximate(&ctx, &job, &Counters::new());

@@ -722,7 +722,7 @@ mod tests {
     use crate::control::Control;
     use crate::math::rng::Rng;
     use crate::scene::hierarchy::Hierarchy;
-    use crate::testutil::{synthetic_city, synthetic_job};
+    use crate::testutil::{synthetic_city, synthetic_job_combined};
     use crate::views::{self, Counters};
 
     /// Per CPV, every subset of its pairs (bit `k`: pair `k` of
@@ -808,11 +808,7 @@ mod tests {
             (Combine::Max, 5),
         ] {
             let scene = synthetic_city(3, 5, 5);
-            let mut job = synthetic_job(5, 5);
-            job.cost_model.combine = combine;
-            if combine == Combine::Primitives {
-                job.target_frame_time_ms = 1.0 + 0.5e-6 * 40_000.0;
-            }
+            let job = synthetic_job_combined(5, 5, combine);
             let h = Hierarchy::build(&scene);
             let ctx = Context::new(&scene, &h, None, &job, Control::default());
             let pv = views::approximate(&ctx, &job, &Counters::new());
