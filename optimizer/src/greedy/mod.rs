@@ -68,6 +68,28 @@ pub struct Selection {
 }
 
 impl Selection {
+    /// No impostor anywhere: every CPV at its cost without impostors.
+    pub fn empty(cpvs: &[Cpv], candidates: usize) -> Selection {
+        Selection {
+            cpv_impostors: vec![Vec::new(); cpvs.len()],
+            cpv_cost: cpvs.iter().map(|c| c.cost).collect(),
+            uses: vec![0; candidates],
+            accepted: 0,
+            evaluations: 0,
+            bounds: 0,
+            pruned: 0,
+            reasons: Vec::new(),
+        }
+    }
+
+    /// The memory of the final impostors, bytes.
+    pub fn memory_bytes(&self, cands: &[Candidate]) -> u64 {
+        self.impostors()
+            .iter()
+            .map(|&i| cands[i as usize].spec.memory_bytes)
+            .sum()
+    }
+
     /// Candidate ids of the final impostors, ascending.
     pub fn impostors(&self) -> Vec<u32> {
         (0..self.uses.len() as u32)
@@ -198,16 +220,7 @@ impl<'a> State<'a> {
                 }
                 v
             },
-            sel: Selection {
-                cpv_impostors: vec![Vec::new(); pv.cpvs.len()],
-                cpv_cost: pv.cpvs.iter().map(|c| c.cost).collect(),
-                uses: vec![0; cands.list.len()],
-                accepted: 0,
-                evaluations: 0,
-                bounds: 0,
-                pruned: 0,
-                reasons: Vec::new(),
-            },
+            sel: Selection::empty(&pv.cpvs, cands.list.len()),
         };
         for kd in 0..st.cell_cpvs.len() {
             st.cell_excess[kd] = st.excess_in_cell(kd);

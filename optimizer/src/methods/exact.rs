@@ -1,8 +1,9 @@
 //! The exact optimum of the greedy's problem, as an integer program.
 //!
 //! Choose candidates so that every CPV meets the target, minimising the
-//! impostors' memory: binary `x_i` (candidate `i` is an impostor) and
-//! binary `y_ic` (it represents its cluster in CPV `c`), with
+//! impostors' memory: binary `x_i` (candidate `i` is an impostor) and uses
+//! `y_ic` (it represents its cluster in CPV `c`; fractional where times add
+//! up, binary where they must be, see [`solve`]), with
 //!
 //! - `y_ic ≤ x_i`;
 //! - per CPV, at most one impostor on any chain of the hierarchy (an
@@ -336,6 +337,10 @@ fn covers(big: &[(u32, Cost)], small: &[(u32, Cost)]) -> bool {
 /// them: a program of the limit's size is never refused by this).
 const EARLY_REFUSAL: u64 = 20;
 
+/// What a refusal for size tells the user.
+const SMALL_ONLY: &str = "the exact method is for small instances (raise exact.max_variables, \
+                          or use a smaller view space or a looser target)";
+
 /// How the program ended.
 #[derive(Clone, Debug)]
 pub struct Outcome {
@@ -498,8 +503,7 @@ pub fn solve(
             "exact.max_variables",
             format!(
                 "the exact program has {variables} variables ({} candidates, {} (candidate, CPV) \
-                 pairs), more than {}; the exact method is for small instances (raise \
-                 exact.max_variables, or use a smaller view space or a looser target)",
+                 pairs), more than {}; {SMALL_ONLY}",
                 inst.cands.len(),
                 inst.uses.len(),
                 p.max_variables
@@ -642,9 +646,7 @@ pub fn select(
             "exact.max_variables",
             format!(
                 "the exact program would list {listed} (candidate, CPV) pairs before removing \
-                 dominated candidates, more than {EARLY_REFUSAL} × {cap}; the exact method is \
-                 for small instances (raise exact.max_variables, or use a smaller view space or \
-                 a looser target)"
+                 dominated candidates, more than {EARLY_REFUSAL} × {cap}; {SMALL_ONLY}"
             ),
         ));
     }
@@ -661,21 +663,7 @@ pub fn select(
         })
         .collect();
     let mut out = solve(ctx, job, pv, cands, &inst, &seed)?;
-    let greedy_bytes: u64 = greedy
-        .impostors()
-        .iter()
-        .map(|&i| cands.list[i as usize].spec.memory_bytes)
-        .sum();
-    let mut sel = Selection {
-        cpv_impostors: vec![Vec::new(); pv.cpvs.len()],
-        cpv_cost: pv.cpvs.iter().map(|c| c.cost).collect(),
-        uses: vec![0; cands.list.len()],
-        accepted: 0,
-        evaluations: 0,
-        bounds: 0,
-        pruned: 0,
-        reasons: Vec::new(),
-    };
+    let mut sel = Selection::empty(&pv.cpvs, cands.list.len());
     for c in 0..pv.cpvs.len() {
         let base = inst.cpv_uses[c] as usize;
         let chosen: Vec<usize> = (0..inst.of_cpv(c).len())
@@ -689,11 +677,8 @@ pub fn select(
         sel.cpv_cost[c] = inst.cost_with(pv, c, &chosen);
     }
     sel.accepted = sel.uses.iter().filter(|&&u| u > 0).count() as u64;
-    let exact_bytes: u64 = sel
-        .impostors()
-        .iter()
-        .map(|&i| cands.list[i as usize].spec.memory_bytes)
-        .sum();
+    let exact_bytes = sel.memory_bytes(&cands.list);
+    let greedy_bytes = greedy.memory_bytes(&cands.list);
     out.stats.memory_bytes = exact_bytes;
     out.stats.greedy_memory_bytes = greedy_bytes;
     out.stats.greedy_over_exact = if exact_bytes > 0 {

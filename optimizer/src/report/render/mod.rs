@@ -31,6 +31,7 @@
 mod accuracy;
 mod chart;
 mod csv;
+mod exact;
 mod sections;
 mod truth;
 mod walk;
