@@ -66,15 +66,15 @@ struct MethodArg(Method);
 
 impl ValueEnum for MethodArg {
     fn value_variants<'a>() -> &'a [Self] {
-        const ALL: [MethodArg; 7] = [
-            MethodArg(Method::ALL[0]),
-            MethodArg(Method::ALL[1]),
-            MethodArg(Method::ALL[2]),
-            MethodArg(Method::ALL[3]),
-            MethodArg(Method::ALL[4]),
-            MethodArg(Method::ALL[5]),
-            MethodArg(Method::ALL[6]),
-        ];
+        const ALL: [MethodArg; Method::ALL.len()] = {
+            let mut out = [MethodArg(Method::Shafts); Method::ALL.len()];
+            let mut i = 0;
+            while i < out.len() {
+                out[i] = MethodArg(Method::ALL[i]);
+                i += 1;
+            }
+            out
+        };
         &ALL
     }
 

@@ -23,18 +23,18 @@ use crate::math::enclosing::enclosing_cone;
 use crate::math::geom::{Aabb, Sphere, face_coords};
 use crate::model::cost::Cost;
 use crate::model::impostor::{ImpostorModel, ViewCell};
-use crate::views::{Context, Counters, ProblemViews, RegionCosts, enclosed_cost};
+use crate::views::{Context, Counters, Cpv, ProblemViews, RegionCosts, enclosed_cost};
 use crate::visibility::ObjectSet;
 
 /// The impostors of one environment-map cell.
-struct CellMaps {
+pub(super) struct CellMaps {
     /// `(objects, sphere, memory bytes, largest texture side)` per impostor.
-    impostors: Vec<(Vec<u32>, Sphere, u64, u32)>,
-    aabb: Aabb,
+    pub(super) impostors: Vec<(Vec<u32>, Sphere, u64, u32)>,
+    pub(super) aabb: Aabb,
 }
 
-/// Grid cells per environment-map cell, per axis.
-fn block(job: &Job, pv: &ProblemViews) -> [u32; 3] {
+/// Grid cells per view cell of side `cell_m`, per axis.
+pub(super) fn block(cell_m: f64, pv: &ProblemViews) -> [u32; 3] {
     let g = &pv.grid;
     let cell = g.largest_cell();
     [0, 1, 2].map(|a| {
@@ -42,7 +42,7 @@ fn block(job: &Job, pv: &ProblemViews) -> [u32; 3] {
         if ext <= 0.0 {
             g.counts[a]
         } else {
-            ((job.env_map.cell_m / ext).round().max(1.0) as u32).min(g.counts[a])
+            ((cell_m / ext).round().max(1.0) as u32).min(g.counts[a])
         }
     })
 }
@@ -53,10 +53,18 @@ fn box_distance(a: &Aabb, b: &Aabb) -> f64 {
     gap.length()
 }
 
-/// Splits the far objects of one cell into face layers.
-fn cell_maps(ctx: &Context, job: &Job, aabb: Aabb, visible: Option<&ObjectSet>) -> CellMaps {
+/// Splits the visible objects of one cell entirely beyond `far` into face
+/// layers: as many as the parallax criterion needs when `layered`, else one
+/// texture per face.
+pub(super) fn cell_maps(
+    ctx: &Context,
+    job: &Job,
+    aabb: Aabb,
+    visible: Option<&ObjectSet>,
+    far: f64,
+    layered: bool,
+) -> CellMaps {
     let imodel = ImpostorModel::new(job);
-    let far = job.env_map.far_m;
     let c = aabb.center();
     let r_cell = aabb.half_diagonal();
     // (face, depth, object) of every visible object entirely beyond `far`.
@@ -93,8 +101,11 @@ fn cell_maps(ctx: &Context, job: &Job, aabb: Aabb, visible: Option<&ObjectSet>) 
             .fold(0.0, f64::max)
             .max(zn * (1.0 + 1e-9));
         let span = 1.0 / zn - 1.0 / zf;
-        let n =
-            ((r_cell * span / (2.0 * imodel.eps * imodel.theta)).ceil() as usize).clamp(1, 4096);
+        let n = if layered {
+            ((r_cell * span / (2.0 * imodel.eps * imodel.theta)).ceil() as usize).clamp(1, 4096)
+        } else {
+            1
+        };
         let mut layers: Vec<Vec<u32>> = vec![Vec::new(); n];
         for &(z, o) in objs {
             let t = ((1.0 / zn - 1.0 / z) / span).clamp(0.0, 1.0);
@@ -151,28 +162,81 @@ pub struct EnvMapPlacement {
     pub cpv_cost: Vec<Cost>,
 }
 
-/// Places environment maps for every view cell of the job's view space.
-pub fn place(ctx: &Context, job: &Job, pv: &ProblemViews, counters: &Counters) -> EnvMapPlacement {
-    let k = block(job, pv);
+/// The blocks of grid cells, `k` cells a side, that tile the view space:
+/// per block its grid-cell range `(lo, hi)`, in block order (x fastest).
+pub(super) fn tiles(pv: &ProblemViews, k: [u32; 3]) -> Vec<([u32; 3], [u32; 3])> {
     let counts = pv.grid.counts;
     let nb = [0, 1, 2].map(|a| counts[a].div_ceil(k[a]));
-    let blocks: Vec<[u32; 3]> = (0..nb[2])
+    (0..nb[2])
         .flat_map(|z| (0..nb[1]).flat_map(move |y| (0..nb[0]).map(move |x| [x, y, z])))
-        .collect();
-    let maps: Vec<CellMaps> = blocks
-        .par_iter()
         .map(|b| {
             let lo = [0, 1, 2].map(|a| b[a] * k[a]);
             let hi = [0, 1, 2].map(|a| ((b[a] + 1) * k[a]).min(counts[a]));
-            let aabb = pv.grid.cell_box(lo, hi);
-            let visible = ctx.visibility.and_then(|v| v.region(lo, hi));
-            cell_maps(ctx, job, aabb, visible.as_deref())
+            (lo, hi)
         })
-        .collect();
+        .collect()
+}
+
+/// The block (index in [`tiles`]' order) of each CPV.
+pub(super) fn cpv_blocks(pv: &ProblemViews, k: [u32; 3]) -> Vec<usize> {
+    let nb = [0, 1, 2].map(|a| pv.grid.counts[a].div_ceil(k[a]));
+    pv.cpvs
+        .iter()
+        .map(|cpv| {
+            let cell = pv.kd[cpv.kd as usize].lo;
+            let b = [0, 1, 2].map(|a| cell[a] / k[a]);
+            ((b[2] * nb[1] + b[1]) * nb[0] + b[0]) as usize
+        })
+        .collect()
+}
+
+/// The cost of a CPV's enclosing frustum with the impostors `maps` (objects
+/// and spheres) in place of their objects.
+pub(super) fn cpv_cost<'a>(
+    ctx: &Context,
+    pv: &ProblemViews,
+    cpv: &Cpv,
+    maps: impl Iterator<Item = (&'a [u32], Sphere)> + Clone,
+    counters: &Counters,
+) -> Cost {
+    let n_obj = ctx.scene.objects.len();
+    // The geometry still drawn: visible and in no impostor.
+    let kd = &pv.kd[cpv.kd as usize];
+    let mut drawn = match ctx.visibility.and_then(|v| v.region(kd.lo, kd.hi)) {
+        Some(v) => (*v).clone(),
+        None => ObjectSet::full(n_obj),
+    };
+    for (objects, _) in maps.clone() {
+        for &o in objects {
+            drawn.remove(o);
+        }
+    }
+    let costs = RegionCosts::new(ctx, &cpv.region, Some(&drawn), counters);
+    let cone = enclosing_cone(&cpv.region, &cpv.vdi, &ctx.lens);
+    let mut cost = enclosed_cost(ctx, &costs, &cone, &cpv.region, None);
+    for (_, s) in maps {
+        if cone.intersects_sphere(s.center, s.radius) {
+            cost += ctx
+                .model
+                .impostor(1, s.radius, cpv.region.distance_to_point(s.center));
+        }
+    }
+    cost
+}
+
+/// The placement of per-block maps (`maps[b]` for block `b` of [`tiles`]),
+/// each CPV served by its block's ([`cpv_blocks`]).
+pub(super) fn collect(
+    ctx: &Context,
+    pv: &ProblemViews,
+    maps: &[CellMaps],
+    blocks: &[usize],
+    counters: &Counters,
+) -> EnvMapPlacement {
     // Impostor ids in block order.
     let mut impostors = Vec::new();
     let mut first = Vec::with_capacity(maps.len() + 1);
-    for m in &maps {
+    for m in maps {
         first.push(impostors.len() as u32);
         for (objects, sphere, memory, res) in &m.impostors {
             let d = m.aabb.distance_to_point(sphere.center);
@@ -194,41 +258,20 @@ pub fn place(ctx: &Context, job: &Job, pv: &ProblemViews, counters: &Counters) -
         }
     }
     first.push(impostors.len() as u32);
-    let block_of = |cell: [u32; 3]| {
-        let b = [0, 1, 2].map(|a| cell[a] / k[a]);
-        ((b[2] * nb[1] + b[1]) * nb[0] + b[0]) as usize
-    };
-    let n_obj = ctx.scene.objects.len();
     let (cpv_impostors, cpv_cost): (Vec<Vec<u32>>, Vec<Cost>) = pv
         .cpvs
         .par_iter()
-        .map(|cpv| {
-            let b = block_of(pv.kd[cpv.kd as usize].lo);
-            let ids: Vec<u32> = (first[b]..first[b + 1]).collect();
-            // The geometry still drawn: visible and in no environment map.
-            let kd = &pv.kd[cpv.kd as usize];
-            let mut drawn = match ctx.visibility.and_then(|v| v.region(kd.lo, kd.hi)) {
-                Some(v) => (*v).clone(),
-                None => ObjectSet::full(n_obj),
-            };
-            for &i in &ids {
-                for &o in &impostors[i as usize].objects {
-                    drawn.remove(o);
-                }
-            }
-            let costs = RegionCosts::new(ctx, &cpv.region, Some(&drawn), counters);
-            let cone = enclosing_cone(&cpv.region, &cpv.vdi, &ctx.lens);
-            let mut cost = enclosed_cost(ctx, &costs, &cone, &cpv.region, None);
-            for &i in &ids {
-                let s = &impostors[i as usize].sphere;
-                let center = DVec3::from_array(s.center);
-                if cone.intersects_sphere(center, s.radius) {
-                    cost += ctx
-                        .model
-                        .impostor(1, s.radius, cpv.region.distance_to_point(center));
-                }
-            }
-            (ids, cost)
+        .zip(blocks)
+        .map(|(cpv, &b)| {
+            let m = &maps[b];
+            let cost = self::cpv_cost(
+                ctx,
+                pv,
+                cpv,
+                m.impostors.iter().map(|i| (&i.0[..], i.1)),
+                counters,
+            );
+            ((first[b]..first[b + 1]).collect(), cost)
         })
         .unzip();
     EnvMapPlacement {
@@ -236,4 +279,18 @@ pub fn place(ctx: &Context, job: &Job, pv: &ProblemViews, counters: &Counters) -
         cpv_impostors,
         cpv_cost,
     }
+}
+
+/// Places environment maps for every view cell of the job's view space.
+pub fn place(ctx: &Context, job: &Job, pv: &ProblemViews, counters: &Counters) -> EnvMapPlacement {
+    let k = block(job.env_map.cell_m, pv);
+    let maps: Vec<CellMaps> = tiles(pv, k)
+        .par_iter()
+        .map(|&(lo, hi)| {
+            let aabb = pv.grid.cell_box(lo, hi);
+            let visible = ctx.visibility.and_then(|v| v.region(lo, hi));
+            cell_maps(ctx, job, aabb, visible.as_deref(), job.env_map.far_m, true)
+        })
+        .collect();
+    collect(ctx, pv, &maps, &cpv_blocks(pv, k), counters)
 }

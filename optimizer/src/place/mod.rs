@@ -147,10 +147,18 @@ impl Prepared<'_> {
         let job = self.job();
         let ctl = &ctx.control;
         let method = job.method();
-        if method == Method::EnvMap {
-            st.begin("env_map", 0.1, "placing environment maps");
-            let em = crate::methods::env_map::place(ctx, job, pv, counters);
-            st.end("env_map");
+        if matches!(method, Method::EnvMap | Method::Dts96) {
+            let em = if method == Method::EnvMap {
+                st.begin("env_map", 0.1, "placing environment maps");
+                let em = crate::methods::env_map::place(ctx, job, pv, counters);
+                st.end("env_map");
+                em
+            } else {
+                st.begin("dts96", 0.1, "placing far-field textures");
+                let (em, _) = crate::methods::dts96::place(ctx, job, pv, counters);
+                st.end("dts96");
+                em
+            };
             ctl.check()?;
             st.begin("placement", 0.97, "writing the placement");
             let placement = assemble(

@@ -36,11 +36,16 @@ pub enum Method {
     /// greedy's selection; for small instances (`exact`'s limits).
     #[serde(rename = "exact")]
     Exact,
+    /// Far-field textures per view cell (Aliaga 1996, automated): in each
+    /// cell with problem views, everything beyond the largest distance at
+    /// which they meet the target becomes one texture per cube face.
+    #[serde(rename = "dts96")]
+    Dts96,
 }
 
 impl Method {
     /// Every method, in the order reports list them.
-    pub const ALL: [Method; 7] = [
+    pub const ALL: [Method; 8] = [
         Method::Shafts,
         Method::Boxes,
         Method::Both,
@@ -48,6 +53,7 @@ impl Method {
         Method::EnvMap,
         Method::ShaftsPrune,
         Method::Exact,
+        Method::Dts96,
     ];
 
     /// The method's name as in JSON and on the command line.
@@ -60,6 +66,7 @@ impl Method {
             Method::EnvMap => "env-map",
             Method::ShaftsPrune => "shafts+prune",
             Method::Exact => "exact",
+            Method::Dts96 => "dts96",
         }
     }
 
@@ -127,6 +134,24 @@ fn default_env_cell() -> f64 {
 }
 fn default_env_far() -> f64 {
     300.0
+}
+
+/// The `dts96` method's knobs.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct Dts96Params {
+    /// Side of a view cell, metres, rounded to a whole number of grid cells.
+    /// Default 25.
+    #[serde(default = "default_env_cell")]
+    pub cell_m: f64,
+}
+
+impl Default for Dts96Params {
+    fn default() -> Self {
+        Dts96Params {
+            cell_m: default_env_cell(),
+        }
+    }
 }
 
 /// The `exact` method's knobs: the size of program it takes on and when the

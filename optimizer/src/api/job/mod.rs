@@ -11,7 +11,7 @@ use crate::math::grid::Grid;
 mod methods;
 mod validate;
 
-pub use methods::{EnvMapParams, ExactParams, Method, PerCellParams};
+pub use methods::{Dts96Params, EnvMapParams, ExactParams, Method, PerCellParams};
 
 /// A placement job.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
@@ -63,6 +63,9 @@ pub struct Job {
     /// The `exact` method's knobs.
     #[serde(default)]
     pub exact: ExactParams,
+    /// The `dts96` method's knobs.
+    #[serde(default)]
+    pub dts96: Dts96Params,
     /// A walkthrough path for frame-time plots (`impostor report`); default:
     /// a loop through the view space.
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -568,6 +571,7 @@ impl Job {
             per_cell: PerCellParams::default(),
             env_map: EnvMapParams::default(),
             exact: ExactParams::default(),
+            dts96: Dts96Params::default(),
             walkthrough: None,
         }
     }

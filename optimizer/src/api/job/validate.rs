@@ -287,6 +287,13 @@ impl Job {
                 format!("{} must be a positive number of metres", e.far_m),
             ));
         }
+        let c = self.dts96.cell_m;
+        if !(c.is_finite() && c > 0.0 && c <= 1e7) {
+            return Err(bad(
+                "dts96.cell_m",
+                format!("{c} must be a positive number of metres"),
+            ));
+        }
         let x = &self.exact;
         if !(1..=100_000_000).contains(&x.max_nodes) {
             return Err(bad(
