@@ -105,7 +105,7 @@ pub fn run(a: EvaluateArgs) -> Result<ExitCode> {
             v.rays
         );
     }
-    if let Some(x) = &eval.parallax {
+    if let Some(x) = eval.parallax.as_ref().filter(|x| x.impostors > 0) {
         eprintln!(
             "parallax of {} impostors: max {:.2} px (impostor {}), mean {:.2} px, \
              {} over the {} px budget ({} over 1.5 times it)",
@@ -116,6 +116,14 @@ pub fn run(a: EvaluateArgs) -> Result<ExitCode> {
             x.over_budget,
             x.max_error_px,
             x.over_budget_1_5
+        );
+    }
+    if let Some(x) = &eval.parallax
+        && x.view_independent > 0
+    {
+        eprintln!(
+            "{} view-independent impostors (valid from every direction) are not in the parallax check",
+            x.view_independent
         );
     }
     if a.images > 0 {

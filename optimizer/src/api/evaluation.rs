@@ -220,6 +220,11 @@ pub struct ParallaxCheck {
     pub over_budget_1_5: u64,
     /// The impostor with the largest error.
     pub worst_impostor: u32,
+    /// Impostors valid from every direction (view cells with a half-angle
+    /// of 180°, such as `iboh`'s warped images), whose error the layered
+    /// parallax bound does not describe: not checked.
+    #[serde(default)]
+    pub view_independent: u64,
 }
 
 /// Mean and minimum of a per-view PSNR.

@@ -84,7 +84,7 @@ fn cell_textures(
                     ctx,
                     pv,
                     &pv.cpvs[c as usize],
-                    maps.impostors.iter().map(|i| (&i.0[..], i.1)),
+                    maps.impostors.iter().map(|i| (&i.0[..], i.1, 1)),
                     &trial,
                 );
                 ctx.model.frame_time(cost)
@@ -204,7 +204,7 @@ mod tests {
                                 &ctx,
                                 &pv,
                                 &pv.cpvs[c as usize],
-                                maps.impostors.iter().map(|i| (&i.0[..], i.1)),
+                                maps.impostors.iter().map(|i| (&i.0[..], i.1, 1)),
                                 &Counters::new(),
                             );
                             ctx.model.frame_time(cost)

@@ -151,8 +151,9 @@ pub(super) fn cell_maps(
     CellMaps { impostors, aabb }
 }
 
-/// The environment-map placement: impostors, and per CPV its impostors'
-/// ids and its cost with them.
+/// A placement made without candidates (environment maps, far-field
+/// textures, image hierarchies): impostors, and per CPV its impostors' ids
+/// and its cost with them.
 pub struct EnvMapPlacement {
     /// The impostors (ids are indices).
     pub impostors: Vec<PlacedImpostor>,
@@ -190,13 +191,13 @@ pub(super) fn cpv_blocks(pv: &ProblemViews, k: [u32; 3]) -> Vec<usize> {
         .collect()
 }
 
-/// The cost of a CPV's enclosing frustum with the impostors `maps` (objects
-/// and spheres) in place of their objects.
+/// The cost of a CPV's enclosing frustum with the impostors `maps` (objects,
+/// sphere and layers drawn) in place of their objects.
 pub(super) fn cpv_cost<'a>(
     ctx: &Context,
     pv: &ProblemViews,
     cpv: &Cpv,
-    maps: impl Iterator<Item = (&'a [u32], Sphere)> + Clone,
+    maps: impl Iterator<Item = (&'a [u32], Sphere, u32)> + Clone,
     counters: &Counters,
 ) -> Cost {
     let n_obj = ctx.scene.objects.len();
@@ -206,7 +207,7 @@ pub(super) fn cpv_cost<'a>(
         Some(v) => (*v).clone(),
         None => ObjectSet::full(n_obj),
     };
-    for (objects, _) in maps.clone() {
+    for (objects, _, _) in maps.clone() {
         for &o in objects {
             drawn.remove(o);
         }
@@ -214,11 +215,11 @@ pub(super) fn cpv_cost<'a>(
     let costs = RegionCosts::new(ctx, &cpv.region, Some(&drawn), counters);
     let cone = enclosing_cone(&cpv.region, &cpv.vdi, &ctx.lens);
     let mut cost = enclosed_cost(ctx, &costs, &cone, &cpv.region, None);
-    for (_, s) in maps {
+    for (_, s, layers) in maps {
         if cone.intersects_sphere(s.center, s.radius) {
             cost += ctx
                 .model
-                .impostor(1, s.radius, cpv.region.distance_to_point(s.center));
+                .impostor(layers, s.radius, cpv.region.distance_to_point(s.center));
         }
     }
     cost
@@ -268,7 +269,7 @@ pub(super) fn collect(
                 ctx,
                 pv,
                 cpv,
-                m.impostors.iter().map(|i| (&i.0[..], i.1)),
+                m.impostors.iter().map(|i| (&i.0[..], i.1, 1)),
                 counters,
             );
             ((first[b]..first[b + 1]).collect(), cost)

@@ -147,18 +147,20 @@ impl Prepared<'_> {
         let job = self.job();
         let ctl = &ctx.control;
         let method = job.method();
-        if matches!(method, Method::EnvMap | Method::Dts96) {
-            let em = if method == Method::EnvMap {
-                st.begin("env_map", 0.1, "placing environment maps");
-                let em = crate::methods::env_map::place(ctx, job, pv, counters);
-                st.end("env_map");
-                em
-            } else {
-                st.begin("dts96", 0.1, "placing far-field textures");
-                let (em, _) = crate::methods::dts96::place(ctx, job, pv, counters);
-                st.end("dts96");
-                em
+        let without_candidates = match method {
+            Method::EnvMap => Some(("env_map", "placing environment maps")),
+            Method::Dts96 => Some(("dts96", "placing far-field textures")),
+            Method::Iboh => Some(("iboh", "placing an image hierarchy")),
+            _ => None,
+        };
+        if let Some((stage, what)) = without_candidates {
+            st.begin(stage, 0.1, what);
+            let em = match method {
+                Method::EnvMap => crate::methods::env_map::place(ctx, job, pv, counters),
+                Method::Dts96 => crate::methods::dts96::place(ctx, job, pv, counters).0,
+                _ => crate::methods::iboh::place(ctx, job, pv, counters),
             };
+            st.end(stage);
             ctl.check()?;
             st.begin("placement", 0.97, "writing the placement");
             let placement = assemble(

@@ -41,11 +41,16 @@ pub enum Method {
     /// which they meet the target becomes one texture per cube face.
     #[serde(rename = "dts96")]
     Dts96,
+    /// An image-based object hierarchy (Lee, Chen and Lin): every cluster
+    /// has view-independent images, drawn wherever the viewpoint is outside
+    /// its sampling circle; no selection and no frame-time guarantee.
+    #[serde(rename = "iboh")]
+    Iboh,
 }
 
 impl Method {
     /// Every method, in the order reports list them.
-    pub const ALL: [Method; 8] = [
+    pub const ALL: [Method; 9] = [
         Method::Shafts,
         Method::Boxes,
         Method::Both,
@@ -54,6 +59,7 @@ impl Method {
         Method::ShaftsPrune,
         Method::Exact,
         Method::Dts96,
+        Method::Iboh,
     ];
 
     /// The method's name as in JSON and on the command line.
@@ -67,6 +73,7 @@ impl Method {
             Method::ShaftsPrune => "shafts+prune",
             Method::Exact => "exact",
             Method::Dts96 => "dts96",
+            Method::Iboh => "iboh",
         }
     }
 
@@ -152,6 +159,41 @@ impl Default for Dts96Params {
             cell_m: default_env_cell(),
         }
     }
+}
+
+/// The `iboh` method's knobs.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct IbohParams {
+    /// Reference images kept per node. Default 9 (the paper kept 492
+    /// images of 18 sampled per node over 53 nodes).
+    #[serde(default = "default_iboh_images")]
+    pub images: u32,
+    /// Side of a reference image, texels. Default: the output's height (the
+    /// paper: 256 for a 256-pixel output).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub reference_px: Option<u32>,
+    /// A node's sampling circle is at least this many node radii. Default
+    /// 1.5.
+    #[serde(default = "default_iboh_kappa")]
+    pub kappa: f64,
+}
+
+impl Default for IbohParams {
+    fn default() -> Self {
+        IbohParams {
+            images: default_iboh_images(),
+            reference_px: None,
+            kappa: default_iboh_kappa(),
+        }
+    }
+}
+
+fn default_iboh_images() -> u32 {
+    9
+}
+fn default_iboh_kappa() -> f64 {
+    1.5
 }
 
 /// The `exact` method's knobs: the size of program it takes on and when the

@@ -11,7 +11,7 @@ use crate::math::grid::Grid;
 mod methods;
 mod validate;
 
-pub use methods::{Dts96Params, EnvMapParams, ExactParams, Method, PerCellParams};
+pub use methods::{Dts96Params, EnvMapParams, ExactParams, IbohParams, Method, PerCellParams};
 
 /// A placement job.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
@@ -66,6 +66,9 @@ pub struct Job {
     /// The `dts96` method's knobs.
     #[serde(default)]
     pub dts96: Dts96Params,
+    /// The `iboh` method's knobs.
+    #[serde(default)]
+    pub iboh: IbohParams,
     /// A walkthrough path for frame-time plots (`impostor report`); default:
     /// a loop through the view space.
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -572,6 +575,7 @@ impl Job {
             env_map: EnvMapParams::default(),
             exact: ExactParams::default(),
             dts96: Dts96Params::default(),
+            iboh: IbohParams::default(),
             walkthrough: None,
         }
     }

@@ -294,6 +294,27 @@ impl Job {
                 format!("{c} must be a positive number of metres"),
             ));
         }
+        let i = &self.iboh;
+        if !(1..=1024).contains(&i.images) {
+            return Err(bad(
+                "iboh.images",
+                format!("{} must be between 1 and 1024", i.images),
+            ));
+        }
+        if let Some(n) = i.reference_px
+            && !(1..=16384).contains(&n)
+        {
+            return Err(bad(
+                "iboh.reference_px",
+                format!("{n} must be between 1 and 16384"),
+            ));
+        }
+        if !(i.kappa.is_finite() && (1.0..=1e6).contains(&i.kappa)) {
+            return Err(bad(
+                "iboh.kappa",
+                format!("{} must be a number of node radii, at least 1", i.kappa),
+            ));
+        }
         let x = &self.exact;
         if !(1..=100_000_000).contains(&x.max_nodes) {
             return Err(bad(
