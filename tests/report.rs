@@ -377,3 +377,86 @@ fn a_report_with_exact_tables_the_greedys_gap() {
         "ratio {ratio:.3} not shown"
     );
 }
+
+/// The seed systems side by side with shafts: `dts96` and `iboh` are
+/// placements judged by the same evaluation (no view over the target where
+/// they claim it), `hic96` a cache replayed along the walkthrough with path
+/// figures and no evaluation; `place` refuses `hic96` naming the report.
+#[test]
+fn a_report_puts_the_seed_systems_beside_shafts() {
+    let dir = tmp("report-seeds");
+    let city = city("0.1");
+    let out = dir.join("r");
+    let o = run(&[
+        "report",
+        s(&city),
+        "--job",
+        s(&small_job()),
+        "--methods",
+        "shafts,dts96,iboh,hic96",
+        "--views",
+        "800",
+        "-o",
+        s(&out),
+    ]);
+    assert_eq!(code(&o), 0, "{}", stderr(&o));
+    let r = read_json(&out.join("report.json"));
+    let runs = r["runs"].as_array().unwrap();
+    let of = |m: &str| runs.iter().find(|x| x["method"] == m).unwrap();
+    for m in ["shafts", "dts96", "iboh"] {
+        let e = &of(m)["eval"];
+        assert_eq!(e["violations_in_solved"], 0, "{m}: {e}");
+        assert_eq!(e["violations_in_cpv_views"], 0, "{m}: {e}");
+    }
+    // Every node of the hierarchy has its images: far more memory than
+    // the shafts' selection.
+    let mem = |m: &str| of(m)["memory_bytes"].as_u64().unwrap();
+    assert!(
+        mem("iboh") > 10 * mem("shafts"),
+        "{} vs {}",
+        mem("iboh"),
+        mem("shafts")
+    );
+    let hic = of("hic96");
+    assert!(hic.get("eval").is_none(), "{hic}");
+    let c = &hic["cache"];
+    assert_eq!(c["frames"], 1000, "{c}");
+    assert!(c["created"].as_u64().unwrap() > 0, "{c}");
+    assert_eq!(c["peak_bytes"], hic["memory_bytes"]);
+    let walk = r["walkthroughs"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|w| w["method"] == "hic96")
+        .unwrap();
+    let frames: Vec<f64> = walk["frame_ms"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|v| v.as_f64().unwrap())
+        .collect();
+    let max = frames.iter().copied().fold(0.0, f64::max);
+    assert!((max - c["max_ms"].as_f64().unwrap()).abs() < 1e-9);
+    // The first frame makes every image it uses: the cache's spike.
+    assert_eq!(frames[0], c["first_ms"].as_f64().unwrap());
+    let html = std::fs::read_to_string(out.join("report.html")).unwrap();
+    assert!(html.contains("<section id=\"methods\">"));
+    assert!(html.contains("a cache built along the path"));
+    // `place` has nothing to write for a cache.
+    let o = run(&[
+        "place",
+        s(&city),
+        "--job",
+        s(&small_job()),
+        "--method",
+        "hic96",
+        "-o",
+        s(&dir.join("p.json")),
+    ]);
+    assert_eq!(code(&o), 2, "{}", stderr(&o));
+    assert!(
+        stderr(&o).contains("impostor report --methods"),
+        "{}",
+        stderr(&o)
+    );
+}

@@ -203,6 +203,7 @@ pub fn sample_report() -> crate::report::Report {
                 }),
             }),
             exact: None,
+            cache: None,
         }
     };
     let mut runs = Vec::new();

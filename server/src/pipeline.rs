@@ -38,6 +38,7 @@ pub(crate) fn check_submission(
         }
     };
     let parsed = Job::from_json(job, "job").map_err(unprocessable)?;
+    parsed.method().check_places("job").map_err(unprocessable)?;
     let objects = optimizer::scene::gltf_load::load_scene_bytes(scene, "scene")
         .map_err(unprocessable)?
         .objects

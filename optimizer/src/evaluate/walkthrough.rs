@@ -143,19 +143,8 @@ impl Prepared<'_> {
             );
             (t, cpv, !imps.is_empty())
         };
-        let views = match walkthrough_views(job) {
-            Some(v) => v,
-            None => self.problem_tour(&|v| time(v, false).0),
-        };
-        if let Some(v) = self.visibility() {
-            let mut cells: Vec<[u32; 3]> = views
-                .iter()
-                .filter_map(|(eye, _)| index.grid.cell_of(*eye))
-                .collect();
-            cells.sort_unstable();
-            cells.dedup();
-            v.prefetch(&cells);
-        }
+        let views = self.walkthrough_path();
+        self.prefetch_path(&views);
         let rows: Vec<(f64, f64, Option<f64>)> = views
             .par_iter()
             .map(|&v| {
@@ -173,6 +162,47 @@ impl Prepared<'_> {
             bare_ms: rows.iter().map(|r| r.1).collect(),
             estimate_ms: rows.iter().map(|r| r.2).collect(),
         })
+    }
+
+    /// The job's walkthrough path, or else the tour through the problem
+    /// (see [`walkthrough_times`](Self::walkthrough_times)).
+    pub fn walkthrough_path(&self) -> Vec<View> {
+        match walkthrough_views(self.job()) {
+            Some(v) => v,
+            None => self.problem_tour(&|v| self.bare_time(v)),
+        }
+    }
+
+    /// The exact time of a view with no impostor (its cell's visible set
+    /// drawn, when the job has visibility); NaN outside the view space.
+    pub fn bare_time(&self, (eye, dir): View) -> f64 {
+        let job = self.job();
+        let Some(cell) = job.grid().cell_of(eye) else {
+            return f64::NAN;
+        };
+        let [w, hgt] = job.camera.resolution;
+        let f = ViewFrustum::new(eye, dir, job.camera.fov_deg, f64::from(w) / f64::from(hgt));
+        let set = self.visibility().map(|v| &v.cell(cell).set);
+        let model = CostModel::new(job);
+        let cost = model.view_cost(self.scene(), self.hierarchy(), &f, |o| {
+            set.is_none_or(|s| s.contains(o))
+        });
+        model.frame_time(cost)
+    }
+
+    /// Computes, in parallel, the visible sets of the cells `views` pass
+    /// through (when the job has visibility).
+    pub fn prefetch_path(&self, views: &[View]) {
+        if let Some(v) = self.visibility() {
+            let grid = self.job().grid();
+            let mut cells: Vec<[u32; 3]> = views
+                .iter()
+                .filter_map(|(eye, _)| grid.cell_of(*eye))
+                .collect();
+            cells.sort_unstable();
+            cells.dedup();
+            v.prefetch(&cells);
+        }
     }
 
     /// The tour through the problem (see

@@ -196,7 +196,8 @@ mod tests {
                 let visible = ctx.visibility.and_then(|v| v.region(lo, hi));
                 let worst = |d: f64| {
                     let maps = cell_maps(&ctx, &job, aabb, visible.as_deref(), d, false);
-                    let objects: Vec<u32> = maps.impostors.iter().flat_map(|i| i.0.clone()).collect();
+                    let objects: Vec<u32> =
+                        maps.impostors.iter().flat_map(|i| i.0.clone()).collect();
                     let t = cpvs
                         .iter()
                         .map(|&c| {
@@ -229,7 +230,9 @@ mod tests {
                 for &c in &cpvs {
                     let ids = &em.cpv_impostors[c as usize];
                     assert_eq!(
-                        ids.iter().map(|&i| em.impostors[i as usize].objects.len()).sum::<usize>(),
+                        ids.iter()
+                            .map(|&i| em.impostors[i as usize].objects.len())
+                            .sum::<usize>(),
                         objects_d.len()
                     );
                 }

@@ -25,9 +25,9 @@ use rayon::prelude::*;
 use crate::api::job::Job;
 use crate::api::placement::{PlacedImpostor, SphereJson, ViewCellJson};
 use crate::math::enclosing::enclosing_cone;
+use crate::methods::env_map::{EnvMapPlacement, cpv_cost};
 use crate::model::cost::Cost;
 use crate::model::impostor::ImpostorModel;
-use crate::methods::env_map::{EnvMapPlacement, cpv_cost};
 use crate::views::{Context, Counters, ProblemViews};
 
 /// Reference images warped per node and frame (the two that bracket the
@@ -162,7 +162,10 @@ mod tests {
         assert!((circle_radius(&job, &imodel, 4.0) - 16.0).abs() < 1e-9);
         // Nine images of 64² RGBA8 texels with mipmaps (4/3).
         let bpt = imodel.bytes_per_texel;
-        assert_eq!(node_memory(&job, &imodel), (9.0 * 64.0 * 64.0 * bpt).ceil() as u64);
+        assert_eq!(
+            node_memory(&job, &imodel),
+            (9.0 * 64.0 * 64.0 * bpt).ceil() as u64
+        );
     }
 
     /// Every CPV's impostors are the highest nodes its enclosing frustum

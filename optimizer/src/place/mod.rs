@@ -80,6 +80,7 @@ impl Prepared<'_> {
     /// memory exceeds `opts.max_memory_bytes` (default: the machine's).
     pub fn place(&self, opts: &PlaceOptions, ctl: &Control) -> Result<PlaceOutput> {
         let job = self.job();
+        job.method().check_places(self.job_name())?;
         let mut st = Stages::new(ctl, self.seconds());
         st.begin(
             "problem_views",
@@ -574,7 +575,10 @@ mod tests {
         // `exact`'s program outgrows this city's whole view space: it is
         // checked on a small part of a city end to end (the CLI tests) and
         // against brute force (`methods::exact`).
-        for m in Method::ALL.into_iter().filter(|&m| m != Method::Exact) {
+        for m in Method::ALL
+            .into_iter()
+            .filter(|&m| m != Method::Exact && m.places())
+        {
             let mut job = base.clone();
             job.method = Some(m);
             job.env_map.far_m = 60.0;

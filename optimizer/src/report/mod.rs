@@ -107,7 +107,7 @@ impl RunStatus {
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize, JsonSchema)]
 pub struct Run {
     /// The method (`shafts`, `boxes`, `both`, `per-cell`, `env-map`,
-    /// `shafts+prune`, `exact`).
+    /// `shafts+prune`, `exact`, `dts96`, `iboh`, `hic96`).
     pub method: String,
     /// The swept knob of this run, or `None` for the base job.
     pub knob: Option<String>,
@@ -148,6 +148,10 @@ pub struct Run {
     /// greedy's, its lower bound (absent for other methods).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub exact: Option<crate::api::stats::ExactStats>,
+    /// A runtime cache's figures along the walkthrough (`hic96`, which
+    /// places nothing ahead of time and has no `eval`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub cache: Option<crate::methods::hic96::PathSummary>,
 }
 
 /// The independent evaluation of one run.

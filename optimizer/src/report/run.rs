@@ -249,6 +249,7 @@ pub fn place_and_evaluate(
         stage_seconds: out.stats.seconds.clone(),
         eval: Some(EvalSummary::from(&evaluation)),
         exact: out.stats.exact.clone(),
+        cache: None,
     };
     Ok(RunOutput {
         place: out,
@@ -287,6 +288,9 @@ fn one_run<'a>(
     walk: bool,
 ) -> Result<(Run, Option<PathTimes>)> {
     let prepared = preps.for_job(input, job)?;
+    if !job.method().places() {
+        return Ok(cache_run(&prepared));
+    }
     let eval = EvalOptions {
         views,
         cpv_views: views,
@@ -302,6 +306,46 @@ fn one_run<'a>(
         &Control::default(),
     )?;
     Ok((out.run, out.frames))
+}
+
+/// The run of a method that places nothing ahead of time (`hic96`): its
+/// cache replayed along the job's walkthrough (or the tour through the
+/// problem). Its memory is the largest resident texture memory along the
+/// path, its impostors the images it created.
+fn cache_run(prepared: &Prepared) -> (Run, Option<PathTimes>) {
+    let job = prepared.job();
+    let start = Instant::now();
+    let views = prepared.walkthrough_path();
+    prepared.prefetch_path(&views);
+    let grid = job.grid();
+    let visible = |eye| {
+        let cell = grid.cell_of(eye)?;
+        prepared.visibility().map(|v| &*v.cell(cell).set)
+    };
+    let frames = crate::methods::hic96::replay(
+        prepared.scene(),
+        prepared.hierarchy(),
+        job,
+        &views,
+        &visible,
+    );
+    let cache = crate::methods::hic96::PathSummary::of(&frames, job.target_frame_time_ms);
+    let run = Run {
+        method: job.method().name().into(),
+        target_frame_time_ms: job.target_frame_time_ms,
+        status: RunStatus::Ok,
+        impostors: cache.created,
+        memory_bytes: cache.peak_bytes,
+        seconds: start.elapsed().as_secs_f64(),
+        cache: Some(cache),
+        ..Run::default()
+    };
+    let times = PathTimes {
+        frame_ms: frames.iter().map(|f| f.frame_ms).collect(),
+        bare_ms: frames.iter().map(|f| f.bare_ms).collect(),
+        estimate_ms: vec![None; frames.len()],
+    };
+    (run, Some(times))
 }
 
 /// A run's outcome, with a refused or cancelled run recorded as failed
@@ -398,7 +442,7 @@ pub fn run(
             None => job.method().name().to_string(),
         })?;
         let is_target = setting.as_ref().is_some_and(|(k, _)| k == TARGET);
-        let walk = is_target || (!has_target_sweep && setting.is_none());
+        let walk = is_target || (!has_target_sweep && setting.is_none()) || !job.method().places();
         let (mut run, frames) = or_failed(job, one_run(&mut preps, input, job, opts.views, walk))?;
         if let Some(t) = frames {
             walkthroughs.push(Walkthrough {
@@ -415,8 +459,8 @@ pub fn run(
         }
         runs.push(run);
     }
-    // Budgets: fractions of each method's unbudgeted memory.
-    for &m in &opts.methods {
+    // Budgets: fractions of each placing method's unbudgeted memory.
+    for &m in opts.methods.iter().filter(|m| m.places()) {
         let Some(free) = runs
             .iter()
             .find(|x| x.knob.is_none() && x.method == m.name() && x.status == RunStatus::Ok)
@@ -438,7 +482,7 @@ pub fn run(
     }
     let stability = if opts.stability {
         let mut methods = Vec::new();
-        for &m in &opts.methods {
+        for &m in opts.methods.iter().filter(|m| m.places()) {
             let mut j = base.clone();
             j.method = Some(m);
             let mut settings = Vec::new();

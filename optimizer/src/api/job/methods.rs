@@ -46,11 +46,17 @@ pub enum Method {
     /// its sampling circle; no selection and no frame-time guarantee.
     #[serde(rename = "iboh")]
     Iboh,
+    /// A hierarchical image cache (Shade et al. 1996) replayed along the
+    /// walkthrough: no placement ahead of time, so `place` refuses it and
+    /// `impostor report` reports its path figures (frame times with their
+    /// spikes, resident memory, images created).
+    #[serde(rename = "hic96")]
+    Hic96,
 }
 
 impl Method {
     /// Every method, in the order reports list them.
-    pub const ALL: [Method; 9] = [
+    pub const ALL: [Method; 10] = [
         Method::Shafts,
         Method::Boxes,
         Method::Both,
@@ -60,6 +66,7 @@ impl Method {
         Method::Exact,
         Method::Dts96,
         Method::Iboh,
+        Method::Hic96,
     ];
 
     /// The method's name as in JSON and on the command line.
@@ -74,6 +81,7 @@ impl Method {
             Method::Exact => "exact",
             Method::Dts96 => "dts96",
             Method::Iboh => "iboh",
+            Method::Hic96 => "hic96",
         }
     }
 
@@ -95,6 +103,30 @@ impl Method {
     /// but `exact`, whose program outgrows all but small instances.
     pub fn in_default_report(self) -> bool {
         self != Method::Exact
+    }
+
+    /// Whether the method makes a placement ahead of time (all but
+    /// `hic96`, a runtime cache replayed along a path).
+    pub fn places(self) -> bool {
+        self != Method::Hic96
+    }
+
+    /// Refuses a method that makes no placement (`source` names the job).
+    pub fn check_places(self, source: &str) -> crate::error::Result<()> {
+        if self.places() {
+            return Ok(());
+        }
+        Err(crate::error::Error::bad(
+            format!("{source}: method"),
+            format!(
+                "{} is an image cache built at run time along a path, not a placement made \
+                 ahead of time: compare it with the other methods with `impostor report --methods \
+                 shafts,{}` (its frame times, resident memory and images created along the \
+                 job's walkthrough)",
+                self.name(),
+                self.name()
+            ),
+        ))
     }
 
     /// The method of a name.

@@ -33,6 +33,7 @@ mod chart;
 mod csv;
 mod exact;
 mod sections;
+mod sideby;
 mod truth;
 mod walk;
 
@@ -40,7 +41,7 @@ use std::fmt::Write as _;
 
 use self::chart::{Chart, Series, number, plottable};
 pub use self::csv::csv_files;
-use super::{MethodStability, Report, Run, RunStatus};
+use super::{MethodStability, Report, Run, RunStatus, Walkthrough};
 
 /// The knob of the target frame time sweep.
 const TARGET_KNOB: &str = "target_frame_time_ms";
@@ -90,10 +91,11 @@ pub fn render_html(r: &Report) -> String {
     };
     let _ = writeln!(
         h,
-        "<nav><a href=\"#memory\">Memory</a> · <a href=\"#achieved\">Frame time</a>{budget_link} · <a href=\"#speed\">Speed vs accuracy</a> · <a href=\"#walkthrough\">Walkthrough</a> · <a href=\"#estimates\">Estimates</a> · <a href=\"#stability\">Stability</a> · <a href=\"#runs\">Runs</a></nav>"
+        "<nav><a href=\"#memory\">Memory</a> · <a href=\"#achieved\">Frame time</a> · <a href=\"#methods\">Methods side by side</a>{budget_link} · <a href=\"#speed\">Speed vs accuracy</a> · <a href=\"#walkthrough\">Walkthrough</a> · <a href=\"#estimates\">Estimates</a> · <a href=\"#stability\">Stability</a> · <a href=\"#runs\">Runs</a></nav>"
     );
     p.memory_chart(&mut h);
     p.achieved_chart(&mut h);
+    p.side_by_side(&mut h);
     p.budget_chart(&mut h);
     p.speed_charts(&mut h);
     p.walkthrough_charts(&mut h);
