@@ -152,6 +152,7 @@ impl Prepared<'_> {
             Method::EnvMap => Some(("env_map", "placing environment maps")),
             Method::Dts96 => Some(("dts96", "placing far-field textures")),
             Method::Iboh => Some(("iboh", "placing an image hierarchy")),
+            Method::Al99 => Some(("al99", "placing images per grid point")),
             _ => None,
         };
         if let Some((stage, what)) = without_candidates {
@@ -159,6 +160,7 @@ impl Prepared<'_> {
             let em = match method {
                 Method::EnvMap => crate::methods::env_map::place(ctx, job, pv, counters),
                 Method::Dts96 => crate::methods::dts96::place(ctx, job, pv, counters).0,
+                Method::Al99 => crate::methods::al99::place(ctx, job, pv, counters),
                 _ => crate::methods::iboh::place(ctx, job, pv, counters),
             };
             st.end(stage);

@@ -52,11 +52,17 @@ pub enum Method {
     /// spikes, resident memory, images created).
     #[serde(rename = "hic96")]
     Hic96,
+    /// Images per view-space grid point (Aliaga and Lastra 1999): per grid
+    /// cell, each view above the target gets at most one image of a
+    /// contiguous subset found by the paper's cost-benefit search; no
+    /// sharing between cells.
+    #[serde(rename = "al99")]
+    Al99,
 }
 
 impl Method {
     /// Every method, in the order reports list them.
-    pub const ALL: [Method; 10] = [
+    pub const ALL: [Method; 11] = [
         Method::Shafts,
         Method::Boxes,
         Method::Both,
@@ -67,6 +73,7 @@ impl Method {
         Method::Dts96,
         Method::Iboh,
         Method::Hic96,
+        Method::Al99,
     ];
 
     /// The method's name as in JSON and on the command line.
@@ -82,6 +89,7 @@ impl Method {
             Method::Dts96 => "dts96",
             Method::Iboh => "iboh",
             Method::Hic96 => "hic96",
+            Method::Al99 => "al99",
         }
     }
 
@@ -191,6 +199,38 @@ impl Default for Dts96Params {
             cell_m: default_env_cell(),
         }
     }
+}
+
+/// The `al99` method's knobs.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct Al99Params {
+    /// The optimisation budget's margin: a view's image brings it within the
+    /// target less this share of the drawing time the target allows (above
+    /// `cost_model.frame_ms`). Default 0.1 (the paper: P − P_opt of 5–10 %
+    /// of the model's primitives, 20 % of P in its worked example).
+    #[serde(default = "default_al99_gap")]
+    pub gap: f64,
+    /// Moves searched ahead before each step of the subset search. Default
+    /// 2 (the paper: "a few").
+    #[serde(default = "default_al99_lookahead")]
+    pub lookahead: u32,
+}
+
+impl Default for Al99Params {
+    fn default() -> Self {
+        Al99Params {
+            gap: default_al99_gap(),
+            lookahead: default_al99_lookahead(),
+        }
+    }
+}
+
+fn default_al99_gap() -> f64 {
+    0.1
+}
+fn default_al99_lookahead() -> u32 {
+    2
 }
 
 /// The `iboh` method's knobs.

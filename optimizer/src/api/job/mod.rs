@@ -11,7 +11,9 @@ use crate::math::grid::Grid;
 mod methods;
 mod validate;
 
-pub use methods::{Dts96Params, EnvMapParams, ExactParams, IbohParams, Method, PerCellParams};
+pub use methods::{
+    Al99Params, Dts96Params, EnvMapParams, ExactParams, IbohParams, Method, PerCellParams,
+};
 
 /// A placement job.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
@@ -69,6 +71,9 @@ pub struct Job {
     /// The `iboh` method's knobs.
     #[serde(default)]
     pub iboh: IbohParams,
+    /// The `al99` method's knobs.
+    #[serde(default)]
+    pub al99: Al99Params,
     /// A walkthrough path for frame-time plots (`impostor report`); default:
     /// a loop through the view space.
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -576,6 +581,7 @@ impl Job {
             exact: ExactParams::default(),
             dts96: Dts96Params::default(),
             iboh: IbohParams::default(),
+            al99: Al99Params::default(),
             walkthrough: None,
         }
     }

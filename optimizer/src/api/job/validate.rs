@@ -294,6 +294,19 @@ impl Job {
                 format!("{c} must be a positive number of metres"),
             ));
         }
+        let a = &self.al99;
+        if !(a.gap.is_finite() && (0.0..=0.9).contains(&a.gap)) {
+            return Err(bad(
+                "al99.gap",
+                format!("{} must be between 0 and 0.9", a.gap),
+            ));
+        }
+        if a.lookahead > 4 {
+            return Err(bad(
+                "al99.lookahead",
+                format!("{} must be at most 4", a.lookahead),
+            ));
+        }
         let i = &self.iboh;
         if !(1..=1024).contains(&i.images) {
             return Err(bad(
