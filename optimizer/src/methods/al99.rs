@@ -353,8 +353,10 @@ pub fn place(ctx: &Context, job: &Job, pv: &ProblemViews, counters: &Counters) -
     // Per cell: its images (members' object ids, sphere, layers, memory,
     // resolution, cell) and per CPV of it the image it takes.
     type Image = (Vec<u32>, Sphere, u32, u64, u32, Aabb);
+    // A cell's images, and per CPV of it the image it takes.
+    type CellImages = (Vec<Image>, Vec<(u32, Option<usize>)>);
     let trial = Counters::new();
-    let cells: Vec<(Vec<Image>, Vec<(u32, Option<usize>)>)> = by_cell
+    let cells: Vec<CellImages> = by_cell
         .par_iter()
         .map(|(_, cpvs)| {
             let views: Vec<View> = cpvs
