@@ -79,12 +79,16 @@ fn outputs_match_the_committed_hashes() {
         "per-cell",
         "env-map",
         "shafts+prune",
+        "dts96",
+        "iboh",
+        "al99",
     ] {
         let (p, e) = (
             dir.join(format!("{method}.json")),
             dir.join(format!("{method}.eval.json")),
         );
-        ok(&[
+        // `al99` leaves problem views unsolved here (exit 3).
+        let o = run(&[
             "place",
             s(&city),
             "--job",
@@ -94,6 +98,7 @@ fn outputs_match_the_committed_hashes() {
             "-o",
             s(&p),
         ]);
+        assert!(matches!(code(&o), 0 | 3), "{method}: {}", stderr(&o));
         let o = evaluate(&city, &small, &p, &e, 2000);
         assert!(matches!(code(&o), 0 | 4), "{}", stderr(&o));
         record(&format!("place {method}"), &p);

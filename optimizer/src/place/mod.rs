@@ -371,9 +371,10 @@ mod tests {
         assert_eq!(n, objs.len(), "{what}");
     }
 
-    fn run(threads: usize, seed: u64) -> Placement {
+    fn run(threads: usize, seed: u64, method: Option<Method>) -> Placement {
         let scene = synthetic_city(seed, 5, 5);
-        let job = synthetic_job(5, 5);
+        let mut job = synthetic_job(5, 5);
+        job.method = method;
         let pool = rayon::ThreadPoolBuilder::new()
             .num_threads(threads)
             .build()
@@ -383,11 +384,18 @@ mod tests {
 
     #[test]
     fn deterministic_across_thread_counts() {
-        let a = serde_json::to_string(&run(1, 3)).unwrap();
-        let b = serde_json::to_string(&run(2, 3)).unwrap();
-        let c = serde_json::to_string(&run(3, 3)).unwrap();
+        let a = serde_json::to_string(&run(1, 3, None)).unwrap();
+        let b = serde_json::to_string(&run(2, 3, None)).unwrap();
+        let c = serde_json::to_string(&run(3, 3, None)).unwrap();
         assert_eq!(a, b);
         assert_eq!(a, c);
+        // The methods placed without candidates, in parallel per cell or
+        // per problem view.
+        for m in [Method::EnvMap, Method::Dts96, Method::Iboh, Method::Al99] {
+            let a = serde_json::to_string(&run(1, 3, Some(m))).unwrap();
+            let b = serde_json::to_string(&run(3, 3, Some(m))).unwrap();
+            assert_eq!(a, b, "{m:?}");
+        }
     }
 
     #[test]
