@@ -439,6 +439,9 @@ fn a_report_puts_the_seed_systems_beside_shafts() {
     assert!((max - c["max_ms"].as_f64().unwrap()).abs() < 1e-9);
     // The first frame makes every image it uses: the cache's spike.
     assert_eq!(frames[0], c["first_ms"].as_f64().unwrap());
+    let csv = std::fs::read_to_string(out.join("runs.csv")).unwrap();
+    let row = csv.lines().find(|l| l.starts_with("hic96,")).unwrap();
+    assert!(row.ends_with(&format!(",{}", c["created"])), "{row}");
     let html = std::fs::read_to_string(out.join("report.html")).unwrap();
     assert!(html.contains("<section id=\"methods\">"));
     assert!(html.contains("a cache built along the path"));

@@ -4,7 +4,7 @@
 use crate::report::{Report, Run};
 
 /// Header of `runs.csv`.
-const RUNS_HEADER: [&str; 30] = [
+const RUNS_HEADER: [&str; 36] = [
     "method",
     "knob",
     "value",
@@ -35,6 +35,12 @@ const RUNS_HEADER: [&str; 30] = [
     "exact_status",
     "exact_greedy_memory_bytes",
     "exact_lower_bound_bytes",
+    "cache_max_ms",
+    "cache_p99_ms",
+    "cache_over_target",
+    "cache_first_ms",
+    "cache_mean_bytes",
+    "cache_created",
 ];
 
 /// The report's data as CSV files, `(file name, contents)`: `runs.csv` (one
@@ -118,6 +124,17 @@ fn runs_csv(runs: &[Run]) -> String {
                     .unwrap_or_default(),
             ]),
             None => fields.extend(std::iter::repeat_n(String::new(), 3)),
+        }
+        match &run.cache {
+            Some(c) => fields.extend([
+                c.max_ms.to_string(),
+                c.p99_ms.to_string(),
+                c.over_target.to_string(),
+                c.first_ms.to_string(),
+                c.mean_bytes.to_string(),
+                c.created.to_string(),
+            ]),
+            None => fields.extend(std::iter::repeat_n(String::new(), 6)),
         }
         row(&mut out, fields);
     }

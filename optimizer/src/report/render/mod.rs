@@ -369,10 +369,15 @@ mod tests {
         assert_eq!(html.matches("</html>").count(), 1);
         // Memory, achieved, budget, two speed charts (cell size, budget)
         // each with its accuracy chart, two walkthroughs (targets 10 and
-        // 20 ms), three estimate charts (one per method), stability.
-        assert_eq!(html.matches("<svg").count(), 13);
-        assert_eq!(html.matches("</svg>").count(), 13);
+        // 20 ms), three estimate charts (one per method), stability, and
+        // per target (five) the methods' memory and achieved frame time.
+        assert_eq!(html.matches("<svg").count(), 23);
+        assert_eq!(html.matches("</svg>").count(), 23);
         for id in [
+            "chart-methods-memory-0",
+            "chart-methods-time-0",
+            "chart-methods-memory-4",
+            "chart-methods-time-4",
             "chart-memory",
             "chart-achieved",
             "chart-budget",
@@ -633,7 +638,7 @@ mod tests {
             csv.lines()
                 .last()
                 .unwrap()
-                .ends_with(",node_limit,770000,650000"),
+                .ends_with(",node_limit,770000,650000,,,,,,"),
             "{csv}"
         );
     }
@@ -701,6 +706,8 @@ mod tests {
         assert!(chart_svg(&html, "chart-achieved").contains("shafts: p99"));
         // And its estimate chart.
         assert!(chart_svg(&html, "chart-estimate-0").contains("y = x"));
-        assert_eq!(html.matches("<svg").count(), 3);
+        // And its sampled maximum and 99th percentile beside the target.
+        assert!(chart_svg(&html, "chart-methods-time-0").contains("p99, sampled views"));
+        assert_eq!(html.matches("<svg").count(), 4);
     }
 }

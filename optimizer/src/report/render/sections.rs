@@ -223,6 +223,10 @@ impl<'a> Page<'a> {
                     x.status.as_str(),
                     x.error.as_deref().unwrap_or("no error given")
                 )
+            } else if needs_eval && x.cache.is_some() {
+                "a cache built along the walkthrough, with no placement to evaluate (see \
+                 Methods side by side)"
+                    .to_string()
             } else if needs_eval && x.eval.is_none() {
                 "not evaluated".to_string()
             } else {
