@@ -58,6 +58,17 @@ struct Subset {
     members: Vec<u32>,
 }
 
+/// An image: the objects it replaces (ascending), their sphere, and its
+/// layers, memory and texels a side.
+#[derive(Clone, Debug)]
+struct Image {
+    objects: Vec<u32>,
+    sphere: Sphere,
+    layers: u32,
+    memory: u64,
+    resolution: u32,
+}
+
 /// One view's search: its items, its cost, and what the figures of merit
 /// need.
 struct View<'a> {
@@ -89,9 +100,9 @@ impl View<'_> {
         Subset { bounds, members }
     }
 
-    /// The image of a subset: its sphere and layers (`None`: no image is
-    /// valid from the whole cell).
-    fn image(&self, s: &Subset) -> Option<(Sphere, u32, u64, u32)> {
+    /// The image of a subset (`None`: no image of it is valid from the
+    /// whole cell).
+    fn image(&self, s: &Subset) -> Option<Image> {
         let h = self.ctx.hierarchy;
         let sphere = s
             .members
@@ -99,19 +110,54 @@ impl View<'_> {
             .map(|&i| h.object_spheres[self.items[i as usize].object as usize])
             .reduce(|a, b| a.merge(&b))?;
         let spec = self.imodel.boxed(&sphere, &self.cell)?;
-        Some((sphere, spec.layers, spec.memory_bytes, spec.resolution))
+        let mut objects: Vec<u32> = s
+            .members
+            .iter()
+            .map(|&m| self.items[m as usize].object)
+            .collect();
+        objects.sort_unstable();
+        Some(Image {
+            objects,
+            sphere,
+            layers: spec.layers,
+            memory: spec.memory_bytes,
+            resolution: spec.resolution,
+        })
+    }
+
+    /// The view's frame time with `image` drawn for its objects (those of
+    /// the view's items among them).
+    fn time_with_image(&self, image: &Image) -> f64 {
+        let saved = self
+            .items
+            .iter()
+            .filter(|it| image.objects.binary_search(&it.object).is_ok())
+            .fold(Cost::default(), |acc, it| acc + it.cost);
+        let drawn = self.ctx.model.impostor(
+            image.layers,
+            image.sphere.radius,
+            self.region.distance_to_point(image.sphere.center),
+        );
+        self.ctx.model.frame_time(self.base - saved + drawn)
     }
 
     /// The view's frame time with the subset imaged (`None`: no image is
     /// valid from the whole cell).
     fn time_with(&self, s: &Subset) -> Option<f64> {
-        let (sphere, layers, _, _) = self.image(s)?;
-        let image = self.ctx.model.impostor(
-            layers,
-            sphere.radius,
-            self.region.distance_to_point(sphere.center),
-        );
-        Some(self.ctx.model.frame_time(self.base - self.saved(s) + image))
+        Some(self.time_with_image(&self.image(s)?))
+    }
+
+    /// The view's frame time with the one of `images` that helps it most,
+    /// and which (`None`: none helps).
+    fn best(&self, images: &[Image]) -> (f64, Option<usize>) {
+        let mut out = (self.ctx.model.frame_time(self.base), None);
+        for (k, img) in images.iter().enumerate() {
+            let t = self.time_with_image(img);
+            if t < out.0 {
+                out = (t, Some(k));
+            }
+        }
+        out
     }
 
     /// The cost of the subset's objects in the view.
@@ -350,11 +396,9 @@ pub fn place(ctx: &Context, job: &Job, pv: &ProblemViews, counters: &Counters) -
             _ => by_cell.push((kd, vec![c])),
         }
     }
-    // Per cell: its images (members' object ids, sphere, layers, memory,
-    // resolution, cell) and per CPV of it the image it takes.
-    type Image = (Vec<u32>, Sphere, u32, u64, u32, Aabb);
-    // A cell's images, and per CPV of it the image it takes.
-    type CellImages = (Vec<Image>, Vec<(u32, Option<usize>)>);
+    // Per cell: its images (valid from the cell's box), and per CPV of it
+    // the image it takes.
+    type CellImages = (Vec<Image>, Aabb, Vec<(u32, Option<usize>)>);
     let trial = Counters::new();
     let cells: Vec<CellImages> = by_cell
         .par_iter()
@@ -363,49 +407,15 @@ pub fn place(ctx: &Context, job: &Job, pv: &ProblemViews, counters: &Counters) -
                 .iter()
                 .map(|&c| view(ctx, job, pv, &pv.cpvs[c as usize], &trial))
                 .collect();
-            // Per view: its images' subsets as object ids, searched for it.
-            let mut images: Vec<(Vec<u32>, Sphere, u32, u64, u32)> = Vec::new();
+            let mut images: Vec<Image> = Vec::new();
             let mut failed = vec![false; views.len()];
-            // The view's time with the image that helps it most.
-            let best = |v: &View, images: &[(Vec<u32>, Sphere, u32, u64, u32)]| {
-                let mut out = (v.ctx.model.frame_time(v.base), None);
-                for (k, img) in images.iter().enumerate() {
-                    let members: Vec<u32> = v
-                        .items
-                        .iter()
-                        .enumerate()
-                        .filter(|(_, it)| img.0.binary_search(&it.object).is_ok())
-                        .map(|(i, _)| i as u32)
-                        .collect();
-                    let s = Subset {
-                        bounds: [0.0; 5],
-                        members,
-                    };
-                    if s.members.is_empty() {
-                        continue;
-                    }
-                    let saved = s
-                        .members
-                        .iter()
-                        .fold(Cost::default(), |acc, &i| acc + v.items[i as usize].cost);
-                    let image = v.ctx.model.impostor(
-                        img.2,
-                        img.1.radius,
-                        v.region.distance_to_point(img.1.center),
-                    );
-                    let t = v.ctx.model.frame_time(v.base - saved + image);
-                    if t < out.0 {
-                        out = (t, Some(k));
-                    }
-                }
-                out
-            };
+            // Each round solves the slowest view or finds it cannot be.
             for _ in 0..views.len() {
                 let worst = views
                     .iter()
                     .enumerate()
                     .filter(|(i, _)| !failed[*i])
-                    .map(|(i, v)| (i, best(v, &images).0))
+                    .map(|(i, v)| (i, v.best(&images).0))
                     .max_by(|a, b| a.1.total_cmp(&b.1).then(b.0.cmp(&a.0)));
                 let Some((i, t)) = worst else { break };
                 if t <= job.target_frame_time_ms {
@@ -413,56 +423,39 @@ pub fn place(ctx: &Context, job: &Job, pv: &ProblemViews, counters: &Counters) -
                 }
                 let v = &views[i];
                 match v.search(budget, job.al99.lookahead) {
-                    Some(s) => {
-                        let (sphere, layers, memory, res) = v.image(&s).expect("searched");
-                        let mut objects: Vec<u32> = s
-                            .members
-                            .iter()
-                            .map(|&m| v.items[m as usize].object)
-                            .collect();
-                        objects.sort_unstable();
-                        images.push((objects, sphere, layers, memory, res));
-                    }
+                    Some(s) => images.push(v.image(&s).expect("searched subsets have images")),
                     None => failed[i] = true,
                 }
             }
             let picks = cpvs
                 .iter()
                 .zip(&views)
-                .map(|(&c, v)| (c, best(v, &images).1))
+                .map(|(&c, v)| (c, v.best(&images).1))
                 .collect();
-            let cell = views
-                .first()
-                .map_or(Aabb::new(glam::DVec3::ZERO, glam::DVec3::ZERO), |v| v.cell);
-            (
-                images
-                    .into_iter()
-                    .map(|(o, s, l, m, r)| (o, s, l, m, r, cell))
-                    .collect(),
-                picks,
-            )
+            (images, views[0].cell, picks)
         })
         .collect();
     let mut impostors = Vec::new();
     let mut pick = vec![None; pv.cpvs.len()];
-    for (images, picks) in cells {
+    for (images, cell, picks) in cells {
         let first = impostors.len() as u32;
-        for (objects, sphere, layers, memory, res, cell) in images {
-            let cost =
-                ctx.model
-                    .impostor(layers, sphere.radius, cell.distance_to_point(sphere.center));
+        for img in images {
+            let s = img.sphere;
+            let cost = ctx
+                .model
+                .impostor(img.layers, s.radius, cell.distance_to_point(s.center));
             impostors.push(PlacedImpostor {
                 id: impostors.len() as u32,
                 node: u32::MAX,
-                objects,
+                objects: img.objects,
                 sphere: SphereJson {
-                    center: sphere.center.to_array(),
-                    radius: sphere.radius,
+                    center: s.center.to_array(),
+                    radius: s.radius,
                 },
                 view_cell: ViewCellJson::from(&ViewCell::Box(cell)),
-                layers,
-                resolution: res,
-                memory_bytes: memory,
+                layers: img.layers,
+                resolution: img.resolution,
+                memory_bytes: img.memory,
                 time_ms: cost.cpu + cost.gpu,
             });
         }
@@ -565,7 +558,8 @@ mod tests {
                 found += 1;
                 let g = v.time_with(&s).expect("a valid image");
                 assert!(g <= budget, "{g} > {budget}");
-                assert!(v.image(&s).is_some());
+                let img = v.image(&s).expect("an image");
+                assert!((v.time_with_image(&img) - g).abs() < 1e-12);
             }
         }
         assert!(found > 0, "no view found a subset");
