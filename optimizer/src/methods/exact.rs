@@ -934,4 +934,73 @@ mod tests {
         assert!(instances >= 10, "{instances}");
         assert!(chains_seen > 0, "no instance had nested clusters in a CPV");
     }
+
+    /// The chain constraints bind: a CPV whose limit only counting nested
+    /// clusters' savings together (an impostor and one inside it, or two of
+    /// one cluster) could reach has no solution, while a limit its best
+    /// antichain reaches is met. Without the chains both would be met.
+    #[test]
+    fn nested_savings_are_not_counted_twice() {
+        let scene = synthetic_city(3, 5, 5);
+        let job = synthetic_job_combined(5, 5, Combine::Sum);
+        let h = Hierarchy::build(&scene);
+        let ctx = Context::new(&scene, &h, None, &job, Control::default());
+        let pv = views::approximate(&ctx, &job, &Counters::new());
+        let cands = crate::candidates::generate(&ctx, &job, &pv);
+        // Every CPV above the target open to every use (a limit of 0 lists
+        // them all), to find the chains; then one CPV limited at a time.
+        let open: Vec<f64> = pv
+            .cpvs
+            .iter()
+            .map(|c| {
+                if c.time > ctx.t_max {
+                    0.0
+                } else {
+                    f64::INFINITY
+                }
+            })
+            .collect();
+        let free = vec![f64::INFINITY; pv.cpvs.len()];
+        let all = Instance::build(&ctx, &pv, &cands, open, |_| true);
+        let saved = |s: Cost| ctx.model.time_saved(s).unwrap();
+        // A CPV with a chain, whose uses all together save clearly more
+        // than its best antichain.
+        let (c, best, total) = (0..pv.cpvs.len())
+            .filter(|&c| !all.chains(&ctx, c, &cands).is_empty())
+            .map(|c| {
+                let here = all.of_cpv(c);
+                let best: f64 = all
+                    .best_antichain(&ctx, c, &cands, |_| true, saved)
+                    .iter()
+                    .map(|&k| saved(here[k].saving))
+                    .sum();
+                let total: f64 = here.iter().map(|u| saved(u.saving)).sum();
+                (c, best, total)
+            })
+            .max_by(|a, b| (a.2 - a.1).total_cmp(&(b.2 - b.1)))
+            .expect("a CPV with nested clusters");
+        assert!(total > best * 1.01 + 1e-6, "{total} vs {best}");
+        let t = ctx.model.frame_time(pv.cpvs[c].cost);
+        let seed = vec![false; all.uses.len()];
+        let with_limit = |need: f64| {
+            let mut limit = free.clone();
+            limit[c] = t - need;
+            Instance::build(&ctx, &pv, &cands, limit, |_| true)
+        };
+        // Within the best antichain's reach: met, by an antichain.
+        let inst = with_limit(0.99 * best);
+        let out = solve(&ctx, &job, &pv, &cands, &inst, &seed).unwrap();
+        assert_eq!(out.stats.status, "optimal");
+        let base = inst.cpv_uses[c] as usize;
+        let chosen: Vec<usize> = (0..inst.of_cpv(c).len())
+            .filter(|&k| out.used[base + k])
+            .collect();
+        assert!(within(&ctx, &pv, &cands, &inst, c, &chosen, 0.0));
+        // Beyond it, below what double counting reaches: no solution.
+        let inst = with_limit(0.5 * (best + total));
+        match solve(&ctx, &job, &pv, &cands, &inst, &seed) {
+            Ok(out) => assert_ne!(out.stats.status, "optimal", "{:?}", out.stats),
+            Err(e) => assert!(e.to_string().contains("solver"), "{e}"),
+        }
+    }
 }
