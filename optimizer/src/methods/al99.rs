@@ -1,8 +1,13 @@
 //! `al99`: automatic image placement per viewpoint (Aliaga and Lastra
-//! 1999), in our terms. Each view-space grid cell is a grid point and its
-//! problem views are its views (the paper's yaw ranges extended to our
-//! direction intervals, as its own "5D" reading suggests); a view gets at
-//! most one image; images are never shared between grid points.
+//! 1999), in our terms. Grid points are nodes of the view-space hierarchy:
+//! first those no longer than `al99.grid_m` a side, each subdivided (its
+//! images discarded) where one of its views finds no valid image, down to
+//! the problem views' cells (the paper's adaptive grid; its star shape is
+//! the node's box, from every point of which an image must be valid). The
+//! views of a grid point are its problem views (the paper's yaw ranges
+//! extended to our direction intervals, as its own "5D" reading suggests);
+//! a view gets at most one image; images are never shared between grid
+//! points.
 //!
 //! Per grid point, the view slowest with the images made so far (each view
 //! taking the one image that helps it most) gets a new image while it is
@@ -12,19 +17,22 @@
 //! top, bottom, right, left: the far one never) halfway through the
 //! subset's objects, choosing the move whose best cost-benefit within
 //! `al99.lookahead` further steps is largest (ties in that order), until no
-//! move leaves the view within the optimisation budget `(1 − al99.gap) ·
-//! target`. Cost-benefit as printed:
+//! move culls enough for the optimisation budget (the target less
+//! `al99.gap` of the drawing time it allows, [`optimisation_budget`]); the
+//! image is the last subset on the way valid from the whole grid point.
+//! Cost-benefit as printed:
 //! `CB = C·(1 − g/G) + B·(B₁·(1 − max(I_w, I_h)/max(S_w, S_h)) + B₂·d/A)` with
 //! `C, B, B₁, B₂ = 0.4, 0.6, 0.1, 0.9`, `g` the view's time with the subset
 //! imaged, `G` without, `I` the subset's screen extent, `S` the screen's,
 //! `d` the subset's nearest distance and `A` the scene's longest side.
 //!
 //! Where the paper counts primitives we count estimated time (its own
-//! "time mode"); its objects are octree cells, ours the scene's objects;
-//! an image is a layered impostor with the grid cell as its box view cell,
-//! layers and texels by the same image criterion as every other method
-//! (the paper's nine-image LDIs are not modelled). A view no subset brings
-//! within the budget stays unsolved (the paper would subdivide its grid).
+//! "time mode"; `cost_model.combine: "primitives"` counts triangles); its
+//! objects are octree cells, ours the scene's objects; an image is a
+//! layered impostor with the grid point's box as its view cell, layers and
+//! texels by the same image criterion as every other method (the paper's
+//! nine-image LDIs are not modelled). A view no subset brings within the
+//! budget at the finest grid point stays unsolved.
 
 use rayon::prelude::*;
 
@@ -306,18 +314,19 @@ fn next_down(x: f64) -> f64 {
     x - x.abs().max(1e-12) * 1e-12
 }
 
-/// The search of CPV `c`: the objects it may image (visible, in its
-/// enclosing frustum, ahead of and apart from its region).
+/// The search of CPV `c` from the grid point of box `cell` (holding its
+/// region): the objects it may image (visible, in its enclosing frustum,
+/// ahead of the grid point and apart from its box).
 fn view<'a>(
     ctx: &'a Context<'a>,
     job: &Job,
     pv: &ProblemViews,
     c: &Cpv,
+    cell: Aabb,
     counters: &Counters,
 ) -> View<'a> {
     let h = ctx.hierarchy;
     let kd = &pv.kd[c.kd as usize];
-    let cell = pv.grid.cell_box(kd.lo, kd.hi);
     let visible = ctx.visibility.and_then(|v| v.region(kd.lo, kd.hi));
     let costs = RegionCosts::new(ctx, &c.region, visible.as_deref(), counters);
     let cone = enclosing_cone(&c.region, &c.vdi, &ctx.lens);
@@ -381,58 +390,109 @@ pub fn optimisation_budget(job: &Job) -> f64 {
     job.target_frame_time_ms - job.al99.gap * (job.target_frame_time_ms - fixed)
 }
 
-/// The `al99` placement: per grid cell with problem views, its images, and
-/// per CPV the one image that helps it most.
-pub fn place(ctx: &Context, job: &Job, pv: &ProblemViews, counters: &Counters) -> EnvMapPlacement {
-    let budget = optimisation_budget(job);
-    // CPVs by grid cell, cells in order.
-    let mut by_cell: Vec<(u32, Vec<u32>)> = Vec::new();
-    let mut order: Vec<u32> = (0..pv.cpvs.len() as u32).collect();
-    order.sort_by_key(|&c| (pv.cpvs[c as usize].kd, c));
-    for c in order {
-        let kd = pv.cpvs[c as usize].kd;
-        match by_cell.last_mut() {
-            Some((k, list)) if *k == kd => list.push(c),
-            _ => by_cell.push((kd, vec![c])),
+/// A grid point's outcome: its images (valid from its box), the box, and
+/// per CPV of it the image it takes.
+type GridPoint = (Vec<Image>, Aabb, Vec<(u32, Option<usize>)>);
+
+/// The images of the grid point of kd node `n` for its CPVs `cpvs`: each
+/// round gives the slowest view an image, or finds it cannot have one.
+/// Where a view finds none and the node has children, the grid point is
+/// subdivided (its images discarded, as the paper's), down to the cells.
+#[allow(clippy::too_many_arguments)] // one grid point of one job
+fn grid_point(
+    ctx: &Context,
+    job: &Job,
+    pv: &ProblemViews,
+    n: u32,
+    cpvs: Vec<u32>,
+    budget: f64,
+    trial: &Counters,
+    out: &mut Vec<GridPoint>,
+) {
+    let kd = &pv.kd[n as usize];
+    let cell = pv.grid.cell_box(kd.lo, kd.hi);
+    let views: Vec<View> = cpvs
+        .iter()
+        .map(|&c| view(ctx, job, pv, &pv.cpvs[c as usize], cell, trial))
+        .collect();
+    let mut images: Vec<Image> = Vec::new();
+    let mut failed = vec![false; views.len()];
+    for _ in 0..views.len() {
+        let worst = views
+            .iter()
+            .enumerate()
+            .filter(|(i, _)| !failed[*i])
+            .map(|(i, v)| (i, v.best(&images).0))
+            .max_by(|a, b| a.1.total_cmp(&b.1).then(b.0.cmp(&a.0)));
+        let Some((i, t)) = worst else { break };
+        if t <= job.target_frame_time_ms {
+            break;
+        }
+        let v = &views[i];
+        match v.search(budget, job.al99.lookahead) {
+            Some(s) => images.push(v.image(&s).expect("searched subsets have images")),
+            None => failed[i] = true,
         }
     }
-    // Per cell: its images (valid from the cell's box), and per CPV of it
-    // the image it takes.
-    type CellImages = (Vec<Image>, Aabb, Vec<(u32, Option<usize>)>);
+    if let Some(children) = kd.children.filter(|_| failed.contains(&true)) {
+        drop(views);
+        for ch in children {
+            let k = &pv.kd[ch as usize];
+            let mine: Vec<u32> = cpvs.iter().copied().filter(|&c| inside(pv, c, k)).collect();
+            if !mine.is_empty() {
+                grid_point(ctx, job, pv, ch, mine, budget, trial, out);
+            }
+        }
+        return;
+    }
+    let picks = cpvs
+        .iter()
+        .zip(&views)
+        .map(|(&c, v)| (c, v.best(&images).1))
+        .collect();
+    out.push((images, cell, picks));
+}
+
+/// Whether CPV `c`'s cell lies in kd node `k`.
+fn inside(pv: &ProblemViews, c: u32, k: &crate::views::KdNode) -> bool {
+    let leaf = &pv.kd[pv.cpvs[c as usize].kd as usize];
+    (0..3).all(|a| leaf.lo[a] >= k.lo[a] && leaf.hi[a] <= k.hi[a])
+}
+
+/// The `al99` placement: grid points from the view-space hierarchy's
+/// nodes no longer than `al99.grid_m` a side, subdivided where a view
+/// finds no valid image; per grid point its images, and per CPV the one
+/// image that helps it most.
+pub fn place(ctx: &Context, job: &Job, pv: &ProblemViews, counters: &Counters) -> EnvMapPlacement {
+    let budget = optimisation_budget(job);
     let trial = Counters::new();
-    let cells: Vec<CellImages> = by_cell
-        .par_iter()
-        .map(|(_, cpvs)| {
-            let views: Vec<View> = cpvs
-                .iter()
-                .map(|&c| view(ctx, job, pv, &pv.cpvs[c as usize], &trial))
-                .collect();
-            let mut images: Vec<Image> = Vec::new();
-            let mut failed = vec![false; views.len()];
-            // Each round solves the slowest view or finds it cannot be.
-            for _ in 0..views.len() {
-                let worst = views
-                    .iter()
-                    .enumerate()
-                    .filter(|(i, _)| !failed[*i])
-                    .map(|(i, v)| (i, v.best(&images).0))
-                    .max_by(|a, b| a.1.total_cmp(&b.1).then(b.0.cmp(&a.0)));
-                let Some((i, t)) = worst else { break };
-                if t <= job.target_frame_time_ms {
-                    break;
-                }
-                let v = &views[i];
-                match v.search(budget, job.al99.lookahead) {
-                    Some(s) => images.push(v.image(&s).expect("searched subsets have images")),
-                    None => failed[i] = true,
+    // The first grid: the highest kd nodes within `grid_m` a side.
+    let mut starts: Vec<(u32, Vec<u32>)> = Vec::new();
+    let mut stack = vec![0u32];
+    while let Some(n) = stack.pop() {
+        let k = &pv.kd[n as usize];
+        let b = pv.grid.cell_box(k.lo, k.hi);
+        match k.children {
+            Some([l, r]) if (b.max - b.min).max_element() > job.al99.grid_m => {
+                stack.push(r);
+                stack.push(l);
+            }
+            _ => {
+                let mine: Vec<u32> = (0..pv.cpvs.len() as u32)
+                    .filter(|&c| inside(pv, c, k))
+                    .collect();
+                if !mine.is_empty() {
+                    starts.push((n, mine));
                 }
             }
-            let picks = cpvs
-                .iter()
-                .zip(&views)
-                .map(|(&c, v)| (c, v.best(&images).1))
-                .collect();
-            (images, views[0].cell, picks)
+        }
+    }
+    let cells: Vec<GridPoint> = starts
+        .into_par_iter()
+        .flat_map_iter(|(n, cpvs)| {
+            let mut out = Vec::new();
+            grid_point(ctx, job, pv, n, cpvs, budget, &trial, &mut out);
+            out
         })
         .collect();
     let mut impostors = Vec::new();
@@ -517,7 +577,9 @@ mod tests {
         assert!((budget - (t - 0.1 * (t - fixed))).abs() < 1e-12);
         let mut found = 0;
         for c in &pv.cpvs {
-            let v = view(&ctx, &job, &pv, c, &Counters::new());
+            let kd = &pv.kd[c.kd as usize];
+            let cell = pv.grid.cell_box(kd.lo, kd.hi);
+            let v = view(&ctx, &job, &pv, c, cell, &Counters::new());
             let all: Vec<u32> = (0..v.items.len() as u32).collect();
             if all.len() < 4 {
                 continue;
@@ -565,11 +627,11 @@ mod tests {
         assert!(found > 0, "no view found a subset");
     }
 
-    /// At most one image per problem view, valid from its whole region,
-    /// never shared between grid cells; the solved views are those whose
-    /// time with their image meets the target.
+    /// At most one image per problem view, valid from its whole region;
+    /// grid points' boxes never overlap, so no image serves two; some views
+    /// are solved.
     #[test]
-    fn one_image_per_view_and_none_shared_between_cells() {
+    fn one_image_per_view_and_none_shared_between_grid_points() {
         let scene = synthetic_city(3, 5, 5);
         let job = synthetic_job(5, 5);
         let h = Hierarchy::build(&scene);
@@ -577,16 +639,30 @@ mod tests {
         let pv = views::approximate(&ctx, &job, &Counters::new());
         let p = place(&ctx, &job, &pv, &Counters::new());
         assert!(!p.impostors.is_empty());
-        let mut cell_of = vec![None; p.impostors.len()];
+        let boxes: Vec<Aabb> = p
+            .impostors
+            .iter()
+            .map(|imp| match ViewCell::from(&imp.view_cell) {
+                ViewCell::Box(b) => b,
+                ViewCell::Shaft { .. } => panic!("al99 images have box view cells"),
+            })
+            .collect();
+        for (a, x) in boxes.iter().enumerate() {
+            for y in &boxes[a + 1..] {
+                let apart = (0..3).any(|k| x.max[k] <= y.min[k] || y.max[k] <= x.min[k]);
+                assert!(x == y || apart, "grid points overlap: {x:?} {y:?}");
+            }
+        }
+        // Grid points no longer than `grid_m` (here every one is subdivided
+        // to a cell: this city's views find no image valid from more).
+        let longest = |b: &Aabb| (b.max - b.min).max_element();
+        assert!(boxes.iter().all(|b| longest(b) <= job.al99.grid_m + 1e-9));
         let mut solved = 0;
         for (c, cpv) in pv.cpvs.iter().enumerate() {
             let ids = &p.cpv_impostors[c];
             assert!(ids.len() <= 1);
             for &i in ids {
-                let cell = ViewCell::from(&p.impostors[i as usize].view_cell);
-                assert!(cell.contains_box(&cpv.region));
-                let prev = cell_of[i as usize].replace(cpv.kd);
-                assert!(prev.is_none_or(|k| k == cpv.kd), "image {i} shared");
+                assert!(boxes[i as usize].contains_box(&cpv.region));
             }
             if ctx.model.frame_time(p.cpv_cost[c]) <= job.target_frame_time_ms {
                 solved += 1;

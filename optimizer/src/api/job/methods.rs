@@ -215,6 +215,11 @@ pub struct Al99Params {
     /// 2 (the paper: "a few").
     #[serde(default = "default_al99_lookahead")]
     pub lookahead: u32,
+    /// The first grid's spacing: grid points are the view-space hierarchy's
+    /// nodes no longer than this a side, subdivided where a view finds no
+    /// valid image, down to the problem views' cells. Metres, default 100.
+    #[serde(default = "default_al99_grid")]
+    pub grid_m: f64,
 }
 
 impl Default for Al99Params {
@@ -222,6 +227,7 @@ impl Default for Al99Params {
         Al99Params {
             gap: default_al99_gap(),
             lookahead: default_al99_lookahead(),
+            grid_m: default_al99_grid(),
         }
     }
 }
@@ -231,6 +237,9 @@ fn default_al99_gap() -> f64 {
 }
 fn default_al99_lookahead() -> u32 {
     2
+}
+fn default_al99_grid() -> f64 {
+    100.0
 }
 
 /// The `iboh` method's knobs.

@@ -301,6 +301,12 @@ impl Job {
                 format!("{} must be between 0 and 0.9", a.gap),
             ));
         }
+        if !(a.grid_m.is_finite() && a.grid_m > 0.0 && a.grid_m <= 1e7) {
+            return Err(bad(
+                "al99.grid_m",
+                format!("{} must be a positive number of metres", a.grid_m),
+            ));
+        }
         if a.lookahead > 4 {
             return Err(bad(
                 "al99.lookahead",
