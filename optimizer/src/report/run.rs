@@ -442,9 +442,11 @@ pub fn run(
             None => job.method().name().to_string(),
         })?;
         let is_target = setting.as_ref().is_some_and(|(k, _)| k == TARGET);
-        let walk = is_target || (!has_target_sweep && setting.is_none()) || !job.method().places();
+        let walk = is_target || (!has_target_sweep && setting.is_none());
         let (mut run, frames) = or_failed(job, one_run(&mut preps, input, job, opts.views, walk))?;
-        if let Some(t) = frames {
+        // (A cache's run always follows the path, for its figures; its
+        // frames are charted where the other methods' are.)
+        if let Some(t) = frames.filter(|_| walk) {
             walkthroughs.push(Walkthrough {
                 method: job.method().name().into(),
                 target_frame_time_ms: job.target_frame_time_ms,

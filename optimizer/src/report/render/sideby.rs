@@ -166,9 +166,10 @@ impl Page<'_> {
             let cell = |v: Option<f64>| v.map_or("–".to_string(), |v| format!("{v:.3}"));
             let cache = x.cache.as_ref().map_or(String::new(), |c| {
                 format!(
-                    "{} images created, mean {:.3} MB held, first frame {:.2} ms, {} frames over \
-                     the target while creating images",
+                    "{} images created ({:.1} a frame), mean {:.3} MB held, first frame {:.2} ms, \
+                     {} frames over the target while creating images",
                     c.created,
+                    c.created as f64 / c.frames.max(1) as f64,
                     c.mean_bytes / 1e6,
                     c.first_ms,
                     c.over_target_creating
