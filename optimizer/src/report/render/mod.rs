@@ -51,7 +51,7 @@ const BUDGET_KNOB: &str = super::run::BUDGET;
 /// Series colours, by method (or target) index.
 const PALETTE: [&str; 10] = [
     "#1f77b4", "#d62728", "#2ca02c", "#ff7f0e", "#9467bd", "#8c564b", "#e377c2", "#17becf",
-    "#7f7f7f", "#bcbd22",
+    "#393b79", "#bcbd22",
 ];
 /// Colour of guides and the Pareto front.
 const INK: &str = "#222222";
