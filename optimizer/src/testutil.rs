@@ -67,6 +67,19 @@ pub fn synthetic_job_combined(nx: u32, nz: u32, combine: crate::api::job::Combin
     job
 }
 
+/// Calls `f` with the placement context and problem views of `job` over
+/// `scene` (no visibility), the start of most method tests.
+pub fn with_problem_views<R>(
+    scene: &Scene,
+    job: &Job,
+    f: impl FnOnce(&crate::views::Context, &crate::views::ProblemViews) -> R,
+) -> R {
+    let h = crate::scene::hierarchy::Hierarchy::build(scene);
+    let ctx = crate::views::Context::new(scene, &h, None, job, crate::control::Control::default());
+    let pv = crate::views::approximate(&ctx, job, &crate::views::Counters::new());
+    f(&ctx, &pv)
+}
+
 /// The geometry of a scene whose objects are solid boxes: each object is a
 /// closed, outward-facing cuboid filling its bounds (one mesh per object,
 /// one opaque single-sided material).

@@ -556,10 +556,7 @@ pub fn place(ctx: &Context, job: &Job, pv: &ProblemViews, counters: &Counters) -
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::control::Control;
-    use crate::scene::hierarchy::Hierarchy;
-    use crate::testutil::{synthetic_city, synthetic_job};
-    use crate::views;
+    use crate::testutil::{synthetic_city, synthetic_job, with_problem_views};
 
     /// The cost-benefit of a hand-made subset, the search's result meeting
     /// the budget with a valid image, and each move shrinking its subset
@@ -568,63 +565,62 @@ mod tests {
     fn cost_benefit_by_hand_and_the_search_meets_its_budget() {
         let scene = synthetic_city(3, 5, 5);
         let job = synthetic_job(5, 5);
-        let h = Hierarchy::build(&scene);
-        let ctx = Context::new(&scene, &h, None, &job, Control::default());
-        let pv = views::approximate(&ctx, &job, &Counters::new());
-        let budget = optimisation_budget(&job);
-        let fixed = job.cost_model.frame_ms;
-        let t = job.target_frame_time_ms;
-        assert!((budget - (t - 0.1 * (t - fixed))).abs() < 1e-12);
-        let mut found = 0;
-        for c in &pv.cpvs {
-            let kd = &pv.kd[c.kd as usize];
-            let cell = pv.grid.cell_box(kd.lo, kd.hi);
-            let v = view(&ctx, &job, &pv, c, cell, &Counters::new());
-            let all: Vec<u32> = (0..v.items.len() as u32).collect();
-            if all.len() < 4 {
-                continue;
+        with_problem_views(&scene, &job, |ctx, pv| {
+            let budget = optimisation_budget(&job);
+            let fixed = job.cost_model.frame_ms;
+            let t = job.target_frame_time_ms;
+            assert!((budget - (t - 0.1 * (t - fixed))).abs() < 1e-12);
+            let mut found = 0;
+            for c in &pv.cpvs {
+                let kd = &pv.kd[c.kd as usize];
+                let cell = pv.grid.cell_box(kd.lo, kd.hi);
+                let v = view(&ctx, &job, &pv, c, cell, &Counters::new());
+                let all: Vec<u32> = (0..v.items.len() as u32).collect();
+                if all.len() < 4 {
+                    continue;
+                }
+                // By hand: two items.
+                let sub = Subset {
+                    bounds: [0.0; 5],
+                    members: vec![0, 1],
+                };
+                let (a, b) = (v.items[0].borders, v.items[1].borders);
+                let extent = (a[1].max(b[1]) - a[0].min(b[0])).max(a[3].max(b[3]) - a[2].min(b[2]));
+                let g = 0.8 * v.ctx.model.frame_time(v.base);
+                let expected = 0.4 * 0.2
+                    + 0.6
+                        * (0.1 * (1.0 - extent / v.screen).clamp(0.0, 1.0)
+                            + 0.9 * (a[4].min(b[4]) / v.longest).clamp(0.0, 1.0));
+                assert!((v.cb(&sub, g) - expected).abs() < 1e-12);
+                // Moves: strictly smaller, within the parent's bounds, one
+                // border changed.
+                let whole = v.subset(
+                    [
+                        f64::NEG_INFINITY,
+                        f64::INFINITY,
+                        f64::NEG_INFINITY,
+                        f64::INFINITY,
+                        f64::NEG_INFINITY,
+                    ],
+                    &all,
+                );
+                assert_eq!(whole.members, all);
+                for m in v.moves(&whole) {
+                    assert!(m.members.len() < whole.members.len() && !m.members.is_empty());
+                    let changed = (0..5).filter(|&k| m.bounds[k] != whole.bounds[k]).count();
+                    assert_eq!(changed, 1);
+                    assert!(m.members.iter().all(|x| whole.members.contains(x)));
+                }
+                if let Some(s) = v.search(budget, 2) {
+                    found += 1;
+                    let g = v.time_with(&s).expect("a valid image");
+                    assert!(g <= budget, "{g} > {budget}");
+                    let img = v.image(&s).expect("an image");
+                    assert!((v.time_with_image(&img) - g).abs() < 1e-12);
+                }
             }
-            // By hand: two items.
-            let sub = Subset {
-                bounds: [0.0; 5],
-                members: vec![0, 1],
-            };
-            let (a, b) = (v.items[0].borders, v.items[1].borders);
-            let extent = (a[1].max(b[1]) - a[0].min(b[0])).max(a[3].max(b[3]) - a[2].min(b[2]));
-            let g = 0.8 * v.ctx.model.frame_time(v.base);
-            let expected = 0.4 * 0.2
-                + 0.6
-                    * (0.1 * (1.0 - extent / v.screen).clamp(0.0, 1.0)
-                        + 0.9 * (a[4].min(b[4]) / v.longest).clamp(0.0, 1.0));
-            assert!((v.cb(&sub, g) - expected).abs() < 1e-12);
-            // Moves: strictly smaller, within the parent's bounds, one
-            // border changed.
-            let whole = v.subset(
-                [
-                    f64::NEG_INFINITY,
-                    f64::INFINITY,
-                    f64::NEG_INFINITY,
-                    f64::INFINITY,
-                    f64::NEG_INFINITY,
-                ],
-                &all,
-            );
-            assert_eq!(whole.members, all);
-            for m in v.moves(&whole) {
-                assert!(m.members.len() < whole.members.len() && !m.members.is_empty());
-                let changed = (0..5).filter(|&k| m.bounds[k] != whole.bounds[k]).count();
-                assert_eq!(changed, 1);
-                assert!(m.members.iter().all(|x| whole.members.contains(x)));
-            }
-            if let Some(s) = v.search(budget, 2) {
-                found += 1;
-                let g = v.time_with(&s).expect("a valid image");
-                assert!(g <= budget, "{g} > {budget}");
-                let img = v.image(&s).expect("an image");
-                assert!((v.time_with_image(&img) - g).abs() < 1e-12);
-            }
-        }
-        assert!(found > 0, "no view found a subset");
+            assert!(found > 0, "no view found a subset");
+        });
     }
 
     /// At most one image per problem view, valid from its whole region;
@@ -634,40 +630,39 @@ mod tests {
     fn one_image_per_view_and_none_shared_between_grid_points() {
         let scene = synthetic_city(3, 5, 5);
         let job = synthetic_job(5, 5);
-        let h = Hierarchy::build(&scene);
-        let ctx = Context::new(&scene, &h, None, &job, Control::default());
-        let pv = views::approximate(&ctx, &job, &Counters::new());
-        let p = place(&ctx, &job, &pv, &Counters::new());
-        assert!(!p.impostors.is_empty());
-        let boxes: Vec<Aabb> = p
-            .impostors
-            .iter()
-            .map(|imp| match ViewCell::from(&imp.view_cell) {
-                ViewCell::Box(b) => b,
-                ViewCell::Shaft { .. } => panic!("al99 images have box view cells"),
-            })
-            .collect();
-        for (a, x) in boxes.iter().enumerate() {
-            for y in &boxes[a + 1..] {
-                let apart = (0..3).any(|k| x.max[k] <= y.min[k] || y.max[k] <= x.min[k]);
-                assert!(x == y || apart, "grid points overlap: {x:?} {y:?}");
+        with_problem_views(&scene, &job, |ctx, pv| {
+            let p = place(&ctx, &job, &pv, &Counters::new());
+            assert!(!p.impostors.is_empty());
+            let boxes: Vec<Aabb> = p
+                .impostors
+                .iter()
+                .map(|imp| match ViewCell::from(&imp.view_cell) {
+                    ViewCell::Box(b) => b,
+                    ViewCell::Shaft { .. } => panic!("al99 images have box view cells"),
+                })
+                .collect();
+            for (a, x) in boxes.iter().enumerate() {
+                for y in &boxes[a + 1..] {
+                    let apart = (0..3).any(|k| x.max[k] <= y.min[k] || y.max[k] <= x.min[k]);
+                    assert!(x == y || apart, "grid points overlap: {x:?} {y:?}");
+                }
             }
-        }
-        // Grid points no longer than `grid_m` (here every one is subdivided
-        // to a cell: this city's views find no image valid from more).
-        let longest = |b: &Aabb| (b.max - b.min).max_element();
-        assert!(boxes.iter().all(|b| longest(b) <= job.al99.grid_m + 1e-9));
-        let mut solved = 0;
-        for (c, cpv) in pv.cpvs.iter().enumerate() {
-            let ids = &p.cpv_impostors[c];
-            assert!(ids.len() <= 1);
-            for &i in ids {
-                assert!(boxes[i as usize].contains_box(&cpv.region));
+            // Grid points no longer than `grid_m` (here every one is subdivided
+            // to a cell: this city's views find no image valid from more).
+            let longest = |b: &Aabb| (b.max - b.min).max_element();
+            assert!(boxes.iter().all(|b| longest(b) <= job.al99.grid_m + 1e-9));
+            let mut solved = 0;
+            for (c, cpv) in pv.cpvs.iter().enumerate() {
+                let ids = &p.cpv_impostors[c];
+                assert!(ids.len() <= 1);
+                for &i in ids {
+                    assert!(boxes[i as usize].contains_box(&cpv.region));
+                }
+                if ctx.model.frame_time(p.cpv_cost[c]) <= job.target_frame_time_ms {
+                    solved += 1;
+                }
             }
-            if ctx.model.frame_time(p.cpv_cost[c]) <= job.target_frame_time_ms {
-                solved += 1;
-            }
-        }
-        assert!(solved > 0);
+            assert!(solved > 0);
+        });
     }
 }

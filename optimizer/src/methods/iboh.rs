@@ -140,10 +140,7 @@ pub fn place(ctx: &Context, job: &Job, pv: &ProblemViews, counters: &Counters) -
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::control::Control;
-    use crate::scene::hierarchy::Hierarchy;
-    use crate::testutil::{synthetic_city, synthetic_job};
-    use crate::views;
+    use crate::testutil::{synthetic_city, synthetic_job, with_problem_views};
 
     #[test]
     fn circle_radius_by_hand() {
@@ -177,66 +174,66 @@ mod tests {
     fn each_cpv_draws_the_highest_nodes_whose_circle_it_is_outside() {
         let scene = synthetic_city(3, 5, 5);
         let job = synthetic_job(5, 5);
-        let h = Hierarchy::build(&scene);
-        let ctx = Context::new(&scene, &h, None, &job, Control::default());
-        let pv = views::approximate(&ctx, &job, &Counters::new());
-        let p = place(&ctx, &job, &pv, &Counters::new());
-        assert_eq!(p.impostors.len(), h.nodes.len());
-        let imodel = ImpostorModel::new(&job);
-        let mut used = 0;
-        for (c, cpv) in pv.cpvs.iter().enumerate() {
-            let cone = enclosing_cone(&cpv.region, &cpv.vdi, &ctx.lens);
-            let cut = &p.cpv_impostors[c];
-            used += cut.len();
-            for &n in cut {
-                let node = &h.nodes[n as usize];
-                let r = circle_radius(&job, &imodel, node.sphere.radius);
-                assert!(cpv.region.distance_to_point(node.sphere.center) >= r);
-                assert!(cone.intersects_sphere(node.sphere.center, node.sphere.radius));
-                // No ancestor would do.
-                let mut a = node.parent;
-                while a != u32::MAX {
-                    let an = &h.nodes[a as usize];
-                    let ra = circle_radius(&job, &imodel, an.sphere.radius);
-                    assert!(cpv.region.distance_to_point(an.sphere.center) < ra);
-                    assert!(!cut.contains(&a));
-                    a = an.parent;
+        with_problem_views(&scene, &job, |ctx, pv| {
+            let h = ctx.hierarchy;
+            let p = place(&ctx, &job, &pv, &Counters::new());
+            assert_eq!(p.impostors.len(), h.nodes.len());
+            let imodel = ImpostorModel::new(&job);
+            let mut used = 0;
+            for (c, cpv) in pv.cpvs.iter().enumerate() {
+                let cone = enclosing_cone(&cpv.region, &cpv.vdi, &ctx.lens);
+                let cut = &p.cpv_impostors[c];
+                used += cut.len();
+                for &n in cut {
+                    let node = &h.nodes[n as usize];
+                    let r = circle_radius(&job, &imodel, node.sphere.radius);
+                    assert!(cpv.region.distance_to_point(node.sphere.center) >= r);
+                    assert!(cone.intersects_sphere(node.sphere.center, node.sphere.radius));
+                    // No ancestor would do.
+                    let mut a = node.parent;
+                    while a != u32::MAX {
+                        let an = &h.nodes[a as usize];
+                        let ra = circle_radius(&job, &imodel, an.sphere.radius);
+                        assert!(cpv.region.distance_to_point(an.sphere.center) < ra);
+                        assert!(!cut.contains(&a));
+                        a = an.parent;
+                    }
                 }
-            }
-            // Every leaf the frustum meets through all its ancestors is
-            // under exactly one node of the cut, or under none and inside
-            // every circle of its path.
-            for (l, leaf) in h.nodes.iter().enumerate() {
-                if leaf.children.is_some() {
-                    continue;
-                }
-                let mut path = vec![l as u32];
-                while let Some(&n) = path.last()
-                    && h.nodes[n as usize].parent != u32::MAX
-                {
-                    path.push(h.nodes[n as usize].parent);
-                }
-                let seen = path.iter().all(|&n| {
-                    let s = &h.nodes[n as usize].sphere;
-                    cone.intersects_sphere(s.center, s.radius)
-                });
-                if !seen {
-                    continue;
-                }
-                let in_cut = path.iter().filter(|n| cut.contains(n)).count();
-                if in_cut == 0 {
-                    assert!(path.iter().all(|&n| {
+                // Every leaf the frustum meets through all its ancestors is
+                // under exactly one node of the cut, or under none and inside
+                // every circle of its path.
+                for (l, leaf) in h.nodes.iter().enumerate() {
+                    if leaf.children.is_some() {
+                        continue;
+                    }
+                    let mut path = vec![l as u32];
+                    while let Some(&n) = path.last()
+                        && h.nodes[n as usize].parent != u32::MAX
+                    {
+                        path.push(h.nodes[n as usize].parent);
+                    }
+                    let seen = path.iter().all(|&n| {
                         let s = &h.nodes[n as usize].sphere;
-                        cpv.region.distance_to_point(s.center)
-                            < circle_radius(&job, &imodel, s.radius)
-                    }));
-                } else {
-                    assert_eq!(in_cut, 1);
+                        cone.intersects_sphere(s.center, s.radius)
+                    });
+                    if !seen {
+                        continue;
+                    }
+                    let in_cut = path.iter().filter(|n| cut.contains(n)).count();
+                    if in_cut == 0 {
+                        assert!(path.iter().all(|&n| {
+                            let s = &h.nodes[n as usize].sphere;
+                            cpv.region.distance_to_point(s.center)
+                                < circle_radius(&job, &imodel, s.radius)
+                        }));
+                    } else {
+                        assert_eq!(in_cut, 1);
+                    }
                 }
             }
-        }
-        assert!(used > 0, "no CPV lies outside any circle");
-        let memory: u64 = p.impostors.iter().map(|i| i.memory_bytes).sum();
-        assert_eq!(memory, h.nodes.len() as u64 * node_memory(&job, &imodel));
+            assert!(used > 0, "no CPV lies outside any circle");
+            let memory: u64 = p.impostors.iter().map(|i| i.memory_bytes).sum();
+            assert_eq!(memory, h.nodes.len() as u64 * node_memory(&job, &imodel));
+        });
     }
 }
