@@ -297,8 +297,9 @@ mod tests {
     }
 
     /// Within the safety sphere no corner's error exceeds `ε` (sampled
-    /// eyes, both corners in front of and behind the quad); just outside
-    /// it, in the worst direction found, some corner's does.
+    /// eyes; boxes around the quad, and wholly in front of or behind it as
+    /// a child's box may be); just outside it, in the worst direction
+    /// found, some corner's does.
     #[test]
     fn the_safety_sphere_bounds_every_corner_error() {
         let mut rng = Rng::new(5);
@@ -313,7 +314,10 @@ mod tests {
                 rng.range(0.5, 4.0),
                 rng.range(0.5, 4.0),
             );
-            let b = Aabb::new(c - half, c + half);
+            // The box around the quad's centre, or (as a child's box) wholly
+            // in front of or behind the quad.
+            let shift = c.normalize() * rng.range(-1.0, 1.0) * (half.length() + 2.0);
+            let b = Aabb::new(c + shift - half, c + shift + half);
             let eps = rng.range(0.0005, 0.01);
             let v0 = DVec3::ZERO;
             let d = safety_radius(v0, c, &b, eps);
