@@ -40,7 +40,7 @@ use crate::api::job::Job;
 use crate::api::placement::{PlacedImpostor, SphereJson, ViewCellJson};
 use crate::math::enclosing::enclosing_cone;
 use crate::math::geom::{Aabb, Sphere};
-use crate::methods::env_map::{EnvMapPlacement, cpv_cost};
+use crate::methods::env_map::{EnvMapPlacement, with_costs};
 use crate::model::cost::Cost;
 use crate::model::impostor::{ImpostorModel, ViewCell};
 use crate::views::{Context, Counters, Cpv, ProblemViews, RegionCosts};
@@ -523,34 +523,8 @@ pub fn place(ctx: &Context, job: &Job, pv: &ProblemViews, counters: &Counters) -
             pick[c as usize] = k.map(|k| first + k as u32);
         }
     }
-    let (cpv_impostors, cpv_cost): (Vec<Vec<u32>>, Vec<Cost>) = pv
-        .cpvs
-        .par_iter()
-        .zip(&pick)
-        .map(|(cpv, &k)| {
-            let ids: Vec<u32> = k.into_iter().collect();
-            let cost = cpv_cost(
-                ctx,
-                pv,
-                cpv,
-                ids.iter().map(|&i| {
-                    let imp: &PlacedImpostor = &impostors[i as usize];
-                    let s = Sphere {
-                        center: glam::DVec3::from_array(imp.sphere.center),
-                        radius: imp.sphere.radius,
-                    };
-                    (&imp.objects[..], s, imp.layers)
-                }),
-                counters,
-            );
-            (ids, cost)
-        })
-        .unzip();
-    EnvMapPlacement {
-        impostors,
-        cpv_impostors,
-        cpv_cost,
-    }
+    let cpv_impostors = pick.into_iter().map(|k| k.into_iter().collect()).collect();
+    with_costs(ctx, pv, impostors, cpv_impostors, counters)
 }
 
 #[cfg(test)]

@@ -259,22 +259,38 @@ pub(super) fn collect(
         }
     }
     first.push(impostors.len() as u32);
-    let (cpv_impostors, cpv_cost): (Vec<Vec<u32>>, Vec<Cost>) = pv
+    let cpv_impostors = blocks
+        .iter()
+        .map(|&b| (first[b]..first[b + 1]).collect())
+        .collect();
+    with_costs(ctx, pv, impostors, cpv_impostors, counters)
+}
+
+/// The placement of `impostors` with each CPV's list: each CPV's cost with
+/// its impostors ([`cpv_cost`], each drawn with its own layers).
+pub(super) fn with_costs(
+    ctx: &Context,
+    pv: &ProblemViews,
+    impostors: Vec<PlacedImpostor>,
+    cpv_impostors: Vec<Vec<u32>>,
+    counters: &Counters,
+) -> EnvMapPlacement {
+    let cpv_cost = pv
         .cpvs
         .par_iter()
-        .zip(blocks)
-        .map(|(cpv, &b)| {
-            let m = &maps[b];
-            let cost = self::cpv_cost(
-                ctx,
-                pv,
-                cpv,
-                m.impostors.iter().map(|i| (&i.0[..], i.1, 1)),
-                counters,
-            );
-            ((first[b]..first[b + 1]).collect(), cost)
+        .zip(&cpv_impostors)
+        .map(|(cpv, ids)| {
+            let maps = ids.iter().map(|&i| {
+                let imp = &impostors[i as usize];
+                let sphere = Sphere {
+                    center: DVec3::from_array(imp.sphere.center),
+                    radius: imp.sphere.radius,
+                };
+                (&imp.objects[..], sphere, imp.layers)
+            });
+            cpv_cost(ctx, pv, cpv, maps, counters)
         })
-        .unzip();
+        .collect();
     EnvMapPlacement {
         impostors,
         cpv_impostors,

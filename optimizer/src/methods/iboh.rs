@@ -25,8 +25,7 @@ use rayon::prelude::*;
 use crate::api::job::Job;
 use crate::api::placement::{PlacedImpostor, SphereJson, ViewCellJson};
 use crate::math::enclosing::enclosing_cone;
-use crate::methods::env_map::{EnvMapPlacement, cpv_cost};
-use crate::model::cost::Cost;
+use crate::methods::env_map::{EnvMapPlacement, with_costs};
 use crate::model::impostor::ImpostorModel;
 use crate::views::{Context, Counters, ProblemViews};
 
@@ -102,7 +101,7 @@ pub fn place(ctx: &Context, job: &Job, pv: &ProblemViews, counters: &Counters) -
             }
         })
         .collect();
-    let (cpv_impostors, cpv_cost): (Vec<Vec<u32>>, Vec<Cost>) = pv
+    let cpv_impostors = pv
         .cpvs
         .par_iter()
         .map(|cpv| {
@@ -119,22 +118,10 @@ pub fn place(ctx: &Context, job: &Job, pv: &ProblemViews, counters: &Counters) -
                 true
             });
             cut.sort_unstable();
-            let cost = self::cpv_cost(
-                ctx,
-                pv,
-                cpv,
-                cut.iter()
-                    .map(|&n| (h.objects(n), h.nodes[n as usize].sphere, WARPED_IMAGES)),
-                counters,
-            );
-            (cut, cost)
+            cut
         })
-        .unzip();
-    EnvMapPlacement {
-        impostors,
-        cpv_impostors,
-        cpv_cost,
-    }
+        .collect();
+    with_costs(ctx, pv, impostors, cpv_impostors, counters)
 }
 
 #[cfg(test)]
