@@ -548,7 +548,7 @@ mod tests {
             for c in &pv.cpvs {
                 let kd = &pv.kd[c.kd as usize];
                 let cell = pv.grid.cell_box(kd.lo, kd.hi);
-                let v = view(&ctx, &job, &pv, c, cell, &Counters::new());
+                let v = view(ctx, &job, pv, c, cell, &Counters::new());
                 let all: Vec<u32> = (0..v.items.len() as u32).collect();
                 if all.len() < 4 {
                     continue;
@@ -605,7 +605,7 @@ mod tests {
         let scene = synthetic_city(3, 5, 5);
         let job = synthetic_job(5, 5);
         with_problem_views(&scene, &job, |ctx, pv| {
-            let p = place(&ctx, &job, &pv, &Counters::new());
+            let p = place(ctx, &job, pv, &Counters::new());
             assert!(!p.impostors.is_empty());
             let boxes: Vec<Aabb> = p
                 .impostors

@@ -163,7 +163,7 @@ mod tests {
         let job = synthetic_job(5, 5);
         with_problem_views(&scene, &job, |ctx, pv| {
             let h = ctx.hierarchy;
-            let p = place(&ctx, &job, &pv, &Counters::new());
+            let p = place(ctx, &job, pv, &Counters::new());
             assert_eq!(p.impostors.len(), h.nodes.len());
             let imodel = ImpostorModel::new(&job);
             let mut used = 0;
