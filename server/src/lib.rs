@@ -5,16 +5,19 @@
 //! geometric computation lives in the `optimizer` crate. CPU work runs on a
 //! fixed pool of worker threads, off the async runtime; the queue is bounded.
 //!
-//! Durability: jobs live in an SQLite database in the data directory (WAL,
-//! `synchronous = FULL`); a job's inputs are written (and synced) into
+//! Durability: jobs live in a database (SQLite in the data directory, WAL
+//! and `synchronous = FULL`, by default; or a PostgreSQL shared by many API
+//! and worker processes); a job's inputs are written (and synced) into
 //! `jobs/<id>/` before its row is committed, and every result file is
 //! written to a temporary name, synced and renamed before the row says
-//! `succeeded`. On start, jobs left `queued` or `running` by a crash are
-//! queued again, so every accepted job reaches a final state and no finished
-//! result is ever truncated.
+//! `succeeded`. Workers claim jobs under leases they renew; a job whose
+//! worker died is claimed again when its lease runs out (with SQLite, on
+//! the next start), so every accepted job reaches a final state and no
+//! finished result is ever truncated.
 //!
-//! Modules: `store` (database and job files), `worker` (queue, worker
-//! threads, live progress), `pipeline` (the calls into the optimizer),
+//! Modules: `db` (the two database engines behind one interface), `store`
+//! (jobs and their files), `worker` (claims, leases, worker threads, live
+//! progress), `pipeline` (the calls into the optimizer),
 //! `api` (routes, handlers, bodies, the OpenAPI document), `error`
 //! (`ApiError`), `job` ([`JobState`]).
 
@@ -30,6 +33,7 @@ use axum::response::{IntoResponse, Response};
 
 mod api;
 pub mod auth;
+mod db;
 mod error;
 mod job;
 mod pipeline;
@@ -76,6 +80,12 @@ pub struct Config {
     /// The most `/v1` requests per second a tenant may make, in bursts of
     /// as many (`--rate-limit`; default: no limit).
     pub rate_limit: Option<u32>,
+    /// The job database (`--database`): `sqlite:PATH` or `postgres://…`;
+    /// `None`: `<data_dir>/jobs.sqlite`.
+    pub database: Option<String>,
+    /// How long a worker's claim on a job lasts without renewal
+    /// (`--lease-seconds`); a job whose worker died runs again after it.
+    pub lease: Duration,
 }
 
 impl Config {
@@ -93,6 +103,8 @@ impl Config {
             tokens: None,
             tenant_max_jobs: None,
             rate_limit: None,
+            database: None,
+            lease: Duration::from_secs(30),
         }
     }
 }
@@ -100,7 +112,13 @@ impl Config {
 struct Inner {
     cfg: Config,
     store: store::Store,
-    queue: worker::Queue,
+    /// This process's worker name (`host:pid:tag`); its workers are
+    /// `name/0`, `name/1`, ….
+    name: String,
+    wakeup: worker::Wakeup,
+    /// Set by [`AppState::shutdown`]: workers claim nothing more.
+    stopping: std::sync::atomic::AtomicBool,
+    workers: std::sync::Mutex<Vec<std::thread::JoinHandle<()>>>,
     live: worker::LiveJobs,
     tokens: Option<Arc<auth::Tokens>>,
     limiter: Option<governor::DefaultKeyedRateLimiter<String>>,
@@ -127,26 +145,44 @@ impl AppState {
             .rate_limit
             .and_then(std::num::NonZeroU32::new)
             .map(|n| governor::RateLimiter::keyed(governor::Quota::per_second(n)));
-        let store = store::Store::open(&cfg.data_dir)?;
-        let pending = store.recover()?;
-        let (queue, rx) = worker::Queue::new();
+        let store = store::Store::open(&cfg.data_dir, cfg.database.as_deref())?;
+        store.recover()?;
         let workers = cfg.workers;
         let state = AppState(Arc::new(Inner {
             cfg,
             store,
-            queue,
+            name: worker::process_name(),
+            wakeup: worker::Wakeup::default(),
+            stopping: std::sync::atomic::AtomicBool::new(false),
+            workers: std::sync::Mutex::new(Vec::new()),
             live: worker::LiveJobs::default(),
             tokens,
             limiter,
         }));
-        for id in pending {
-            state.0.queue.push(id);
+        let handles = worker::spawn_workers(&state, workers)?;
+        if let Ok(mut w) = state.0.workers.lock() {
+            *w = handles;
         }
-        worker::spawn_workers(&state, rx, workers)?;
         if let Some(days) = state.0.cfg.retain_days {
             spawn_retention(&state, days)?;
         }
         Ok(state)
+    }
+
+    /// Stops this process's workers: they claim nothing more, running jobs
+    /// stop at their next check and their leases are given back (queued
+    /// again for any worker). Waits for them.
+    pub fn shutdown(&self) {
+        worker::shutdown(self);
+        let handles = self
+            .0
+            .workers
+            .lock()
+            .map(|mut w| std::mem::take(&mut *w))
+            .unwrap_or_default();
+        for h in handles {
+            let _ = h.join();
+        }
     }
 }
 
@@ -242,11 +278,12 @@ async fn guard(State(st): State<AppState>, mut req: Request, next: Next) -> Resp
             )
             .into_response();
         }
-        if let Err(e) = st.check_queue() {
-            return e.into_response();
-        }
         let (st2, access2) = (st.clone(), access.clone());
-        let quota = tokio::task::spawn_blocking(move || st2.check_quota(&access2)).await;
+        let quota = tokio::task::spawn_blocking(move || {
+            st2.check_queue()?;
+            st2.check_quota(&access2)
+        })
+        .await;
         match quota {
             Ok(Ok(())) => {}
             Ok(Err(e)) => return e.into_response(),
@@ -285,10 +322,11 @@ impl AppState {
     }
 
     /// 429 when the queue is full: checked from a submission's headers and
-    /// again once it is parsed (jobs may have arrived meanwhile).
+    /// again once it is parsed (jobs may have arrived meanwhile); blocking,
+    /// a database read (the queue is shared by every process).
     pub(crate) fn check_queue(&self) -> Result<(), ApiError> {
         let max_queue = self.0.cfg.max_queue;
-        if self.0.queue.waiting() >= max_queue {
+        if self.0.store.queued().map_err(ApiError::internal)? >= max_queue {
             return Err(ApiError::new(
                 StatusCode::TOO_MANY_REQUESTS,
                 format!("the queue is full ({max_queue} jobs waiting)"),

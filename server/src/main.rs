@@ -31,6 +31,54 @@ enum Command {
     /// Manage the API tokens of a tokens file.
     #[command(subcommand)]
     Token(TokenCommand),
+    /// Run jobs without serving HTTP: claim them from a shared PostgreSQL
+    /// database (`FOR UPDATE SKIP LOCKED`), under leases renewed while they
+    /// run, until SIGTERM or SIGINT (then running jobs stop and their
+    /// leases are given back, queued again for another worker).
+    Worker(WorkerArgs),
+}
+
+#[derive(Args)]
+struct WorkerArgs {
+    /// The job database, shared with the API processes: postgres://…
+    #[arg(long, value_name = "URL")]
+    database: String,
+    /// The folder of the job files, shared with the API processes (the
+    /// same path on every machine, e.g. a network file system).
+    #[arg(long, default_value = "impostor-data")]
+    data_dir: PathBuf,
+    /// Jobs this process runs at once.
+    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u64).range(1..=256))]
+    workers: u64,
+    #[command(flatten)]
+    limits: JobLimits,
+}
+
+/// What every process that runs jobs takes.
+#[derive(Args)]
+struct JobLimits {
+    /// How long a claim on a job lasts without renewal, seconds (renewed
+    /// every third of it); a job whose worker died runs again after it.
+    #[arg(long, value_name = "SECONDS", default_value_t = 30, value_parser = clap::value_parser!(u64).range(1..=86_400))]
+    lease_seconds: u64,
+    /// The longest a job may run, seconds: it is stopped and ends `failed`
+    /// (default: no limit).
+    #[arg(long, value_name = "SECONDS", value_parser = clap::value_parser!(u64).range(1..))]
+    job_max_seconds: Option<u64>,
+    /// The most memory a job's placement may be predicted to need, GB: a
+    /// job predicted to need more ends `failed` before allocating it
+    /// (default: the machine's memory).
+    #[arg(long, value_name = "GB", value_parser = parse_gb)]
+    job_max_memory: Option<u64>,
+}
+
+/// What a server process does.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+enum Role {
+    /// Serve HTTP and run jobs (the single-process default).
+    All,
+    /// Serve HTTP only; `impostor-server worker` processes run the jobs.
+    Api,
 }
 
 #[derive(Subcommand)]
@@ -83,10 +131,18 @@ struct Serve {
     /// Address to listen on.
     #[arg(long, default_value = "127.0.0.1:8080")]
     listen: String,
-    /// Directory of the job database and files.
+    /// Directory of the job files (and of the SQLite database).
     #[arg(long, default_value = "impostor-data")]
     data_dir: PathBuf,
-    /// Worker threads (jobs running at once).
+    /// The job database: `sqlite:PATH` (default `<data-dir>/jobs.sqlite`)
+    /// or `postgres://user@host:port/db`, shared by every API and worker
+    /// process (with the same --data-dir folder).
+    #[arg(long, value_name = "URL")]
+    database: Option<String>,
+    /// `all`: serve and run jobs; `api`: serve only (workers elsewhere).
+    #[arg(long, value_enum, default_value_t = Role::All)]
+    role: Role,
+    /// Worker threads (jobs running at once) with --role all.
     #[arg(long, default_value_t = 1)]
     workers: usize,
     /// Largest upload, MiB.
@@ -95,15 +151,8 @@ struct Serve {
     /// Most jobs waiting in the queue.
     #[arg(long, default_value_t = 64)]
     max_queue: usize,
-    /// The longest a job may run, seconds: it is stopped and ends `failed`
-    /// (default: no limit).
-    #[arg(long, value_name = "SECONDS", value_parser = clap::value_parser!(u64).range(1..))]
-    job_max_seconds: Option<u64>,
-    /// The most memory a job's placement may be predicted to need, GB: a
-    /// job predicted to need more ends `failed` before allocating it
-    /// (default: the machine's memory).
-    #[arg(long, value_name = "GB", value_parser = parse_gb)]
-    job_max_memory: Option<u64>,
+    #[command(flatten)]
+    limits: JobLimits,
     /// Remove finished jobs (succeeded, failed or cancelled) and their files
     /// this many days after they finished (default: keep them).
     #[arg(long, value_name = "DAYS", value_parser = parse_days)]
@@ -130,6 +179,7 @@ fn main() -> ExitCode {
     let cli = Cli::parse();
     match cli.command {
         Some(Command::Token(cmd)) => token(cmd),
+        Some(Command::Worker(args)) => worker(args),
         None => serve(cli.serve),
     }
 }
@@ -172,13 +222,7 @@ fn serve(cli: Serve) -> ExitCode {
 }
 
 async fn serve_async(cli: Serve) -> ExitCode {
-    tracing_subscriber::fmt()
-        .with_env_filter(
-            tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| "info".into()),
-        )
-        .with_writer(std::io::stderr)
-        .with_ansi(std::io::stderr().is_terminal())
-        .init();
+    init_tracing();
     if cli.tokens.is_none() && !cli.no_auth {
         eprintln!(
             "error: give --tokens FILE (create one with `impostor-server token add --tokens \
@@ -187,11 +231,14 @@ async fn serve_async(cli: Serve) -> ExitCode {
         return ExitCode::from(2);
     }
     let mut cfg = Config::new(cli.data_dir);
-    cfg.workers = cli.workers.max(1);
+    cfg.workers = match cli.role {
+        Role::All => cli.workers.max(1),
+        Role::Api => 0,
+    };
+    cfg.database = cli.database;
+    cli.limits.apply(&mut cfg);
     cfg.max_upload_mb = cli.max_upload_mb.max(1);
     cfg.max_queue = cli.max_queue.max(1);
-    cfg.job_max_seconds = cli.job_max_seconds;
-    cfg.job_max_memory_bytes = cli.job_max_memory;
     cfg.retain_days = cli.retain_days;
     cfg.tokens = cli.tokens;
     cfg.tenant_max_jobs = cli.tenant_max_jobs.map(|n| n as usize);
@@ -223,7 +270,8 @@ async fn serve_async(cli: Serve) -> ExitCode {
              delete every job on {addr}"
         );
     }
-    let state = match AppState::open(cfg) {
+    // The database client blocks: off the runtime's scheduling.
+    let state = match tokio::task::block_in_place(|| AppState::open(cfg)) {
         Ok(s) => s,
         Err(e) => {
             eprintln!("error: {e}");
@@ -231,13 +279,75 @@ async fn serve_async(cli: Serve) -> ExitCode {
         }
     };
     tracing::info!("listening on {addr}");
-    match run(listener, state, shutdown_signal()).await {
+    let served = run(listener, state.clone(), shutdown_signal()).await;
+    // Running jobs stop and give their leases back.
+    tokio::task::block_in_place(|| state.shutdown());
+    match served {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
             eprintln!("error: {e}");
             ExitCode::FAILURE
         }
     }
+}
+
+impl JobLimits {
+    fn apply(&self, cfg: &mut Config) {
+        cfg.lease = std::time::Duration::from_secs(self.lease_seconds);
+        cfg.job_max_seconds = self.job_max_seconds;
+        cfg.job_max_memory_bytes = self.job_max_memory;
+    }
+}
+
+/// `impostor-server worker`: runs jobs until SIGTERM or SIGINT: exit 0; 2
+/// when the database cannot be opened.
+fn worker(args: WorkerArgs) -> ExitCode {
+    init_tracing();
+    if !(args.database.starts_with("postgres://") || args.database.starts_with("postgresql://"))
+    {
+        eprintln!(
+            "error: a worker process needs a database shared with the API processes: \
+             --database postgres://…, not {:?} (with SQLite, one `impostor-server` process \
+             serves and runs jobs)",
+            args.database
+        );
+        return ExitCode::from(2);
+    }
+    let mut cfg = Config::new(args.data_dir);
+    cfg.workers = args.workers as usize;
+    cfg.database = Some(args.database);
+    args.limits.apply(&mut cfg);
+    let state = match AppState::open(cfg) {
+        Ok(s) => s,
+        Err(e) => {
+            eprintln!("error: {e}");
+            return ExitCode::from(2);
+        }
+    };
+    tracing::info!(workers = args.workers, "worker started");
+    match tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()
+    {
+        Ok(rt) => rt.block_on(shutdown_signal()),
+        Err(e) => {
+            eprintln!("error: cannot start the runtime: {e}");
+            return ExitCode::FAILURE;
+        }
+    }
+    state.shutdown();
+    tracing::info!("worker stopped");
+    ExitCode::SUCCESS
+}
+
+fn init_tracing() {
+    tracing_subscriber::fmt()
+        .with_env_filter(
+            tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| "info".into()),
+        )
+        .with_writer(std::io::stderr)
+        .with_ansi(std::io::stderr().is_terminal())
+        .init();
 }
 
 /// Completes on Ctrl-C (SIGINT) or SIGTERM, what service managers and

@@ -1,6 +1,7 @@
-//! Durable job storage: the SQLite database (`jobs.sqlite`: WAL,
-//! `synchronous = FULL`) and one directory of files per job, written
-//! atomically. Also recovers the jobs a previous process left unfinished.
+//! Durable job storage: the job database ([`crate::db`]: SQLite's
+//! `jobs.sqlite` with WAL and `synchronous = FULL` by default, or a shared
+//! PostgreSQL) and one directory of files per job, written atomically.
+//! Jobs are claimed by workers under leases (see [`Store::claim`]).
 //!
 //! A job has two ids: its row's integer id, internal (queue order, folder
 //! name, logs), and its public id, a random UUID (`uid`), the only one the
@@ -8,17 +9,15 @@
 
 use std::io;
 use std::path::{Path, PathBuf};
-use std::sync::{Mutex, MutexGuard};
 use std::time::{SystemTime, UNIX_EPOCH};
 
-use rusqlite::Connection;
-
+use crate::db::{Backend, Db, Value};
 use crate::job::JobState;
 
 /// The job database and the job directories under `<data_dir>/jobs/`;
 /// uploads arrive in `<data_dir>/uploads/` (see [`Staged`]).
 pub(crate) struct Store {
-    db: Mutex<Connection>,
+    db: Db,
     jobs_dir: PathBuf,
     uploads_dir: PathBuf,
 }
@@ -83,6 +82,8 @@ pub(crate) struct JobRow {
     pub created_ms: i64,
     pub started_ms: Option<i64>,
     pub finished_ms: Option<i64>,
+    /// The stored progress of a running job (its worker's last renewal).
+    pub progress: Option<f64>,
 }
 
 /// Milliseconds since the Unix epoch.
@@ -101,7 +102,9 @@ fn db_err(e: rusqlite::Error) -> io::Error {
 /// one, never a truncated result.
 pub(crate) fn write_atomic(path: &Path, bytes: &[u8]) -> io::Result<()> {
     use std::io::Write;
-    let tmp = path.with_extension("tmp");
+    // A name of its own: two workers may write the same job's results
+    // (one whose lease ran out while it still ran).
+    let tmp = path.with_extension(format!("tmp-{}", uuid::Uuid::new_v4().simple()));
     {
         let mut f = std::fs::File::create(&tmp)?;
         f.write_all(bytes)?;
@@ -116,104 +119,97 @@ pub(crate) fn write_atomic(path: &Path, bytes: &[u8]) -> io::Result<()> {
     Ok(())
 }
 
+/// What a worker's lease renewal found.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) struct Renewal {
+    /// The worker still holds the job's lease (renewed).
+    pub held: bool,
+    /// A `DELETE` asked the job to stop.
+    pub cancel: bool,
+}
+
+/// Figures for `/metrics`.
+#[derive(Clone, Debug, Default)]
+pub(crate) struct Figures {
+    /// Jobs per state, in [`JobState::ALL`]'s order.
+    pub by_state: [u64; 5],
+    /// Workers seen within the last [`WORKER_SEEN_MS`].
+    pub workers: u64,
+    /// Finished jobs' run times (start to finish), seconds: count and sum.
+    pub finished: u64,
+    pub finished_seconds: f64,
+    /// How many finished jobs ran at most each of [`DURATION_BUCKETS`] s.
+    pub buckets: Vec<u64>,
+}
+
+/// The upper bounds of the job-duration histogram, seconds.
+pub(crate) const DURATION_BUCKETS: [f64; 8] = [1.0, 5.0, 15.0, 60.0, 300.0, 900.0, 3600.0, 14400.0];
+
+/// A worker not seen for this long is not counted.
+pub(crate) const WORKER_SEEN_MS: i64 = 60_000;
+
+fn int(v: i64) -> Value {
+    Value::from(v)
+}
+
+fn text(v: &str) -> Value {
+    Value::from(v)
+}
+
+fn state(s: JobState) -> Value {
+    Value::from(s.as_str())
+}
+
 impl Store {
-    /// Opens (or creates) the database and the job directory under
-    /// `data_dir`, creating the tables a new database lacks.
-    pub fn open(data_dir: &Path) -> io::Result<Store> {
+    /// Opens (or creates) the job directory under `data_dir` and the
+    /// database (`database`: `sqlite:PATH` or `postgres://…`; default
+    /// `<data_dir>/jobs.sqlite`), applying the migrations it lacks.
+    pub fn open(data_dir: &Path, database: Option<&str>) -> io::Result<Store> {
         let jobs_dir = data_dir.join("jobs");
         std::fs::create_dir_all(&jobs_dir)?;
         let uploads_dir = data_dir.join("uploads");
         std::fs::create_dir_all(&uploads_dir)?;
-        let db = Connection::open(data_dir.join("jobs.sqlite")).map_err(db_err)?;
-        db.execute_batch(
-            "PRAGMA journal_mode = WAL;
-             PRAGMA synchronous = FULL;
-             CREATE TABLE IF NOT EXISTS jobs (
-                 id INTEGER PRIMARY KEY,
-                 state TEXT NOT NULL,
-                 stage TEXT,
-                 error TEXT,
-                 summary TEXT,
-                 bake INTEGER NOT NULL,
-                 scene_kind TEXT NOT NULL,
-                 created_ms INTEGER NOT NULL,
-                 started_ms INTEGER,
-                 finished_ms INTEGER
-             );
-             CREATE TABLE IF NOT EXISTS meta (k TEXT PRIMARY KEY, v INTEGER NOT NULL);",
-        )
-        .map_err(db_err)?;
-        // Public ids: a database of an older version has none; its jobs get
-        // one each (their old numeric ids are then 404 like any unknown id).
-        let has_uid = db
-            .prepare("SELECT 1 FROM pragma_table_info('jobs') WHERE name = 'uid'")
-            .and_then(|mut s| s.exists([]))
-            .map_err(db_err)?;
-        if !has_uid {
-            db.execute_batch("ALTER TABLE jobs ADD COLUMN uid TEXT")
-                .map_err(db_err)?;
-        }
-        let missing: Vec<i64> = db
-            .prepare("SELECT id FROM jobs WHERE uid IS NULL")
-            .and_then(|mut s| s.query_map([], |r| r.get(0))?.collect())
-            .map_err(db_err)?;
-        for id in missing {
-            db.execute(
-                "UPDATE jobs SET uid = ?2 WHERE id = ?1",
-                rusqlite::params![id, new_uid()],
-            )
-            .map_err(db_err)?;
-        }
-        db.execute_batch("CREATE UNIQUE INDEX IF NOT EXISTS jobs_uid ON jobs (uid)")
-            .map_err(db_err)?;
-        // Tenants: the jobs of an older version, or of a server without
-        // tokens, have none (only a server without tokens shows them).
-        let has_tenant = db
-            .prepare("SELECT 1 FROM pragma_table_info('jobs') WHERE name = 'tenant'")
-            .and_then(|mut s| s.exists([]))
-            .map_err(db_err)?;
-        if !has_tenant {
-            db.execute_batch("ALTER TABLE jobs ADD COLUMN tenant TEXT")
-                .map_err(db_err)?;
-        }
-        db.execute_batch("CREATE INDEX IF NOT EXISTS jobs_tenant ON jobs (tenant, id)")
-            .map_err(db_err)?;
+        let db = Db::open(database, data_dir, sqlite_setup)?;
         Ok(Store {
-            db: Mutex::new(db),
+            db,
             jobs_dir,
             uploads_dir,
         })
     }
 
-    fn db(&self) -> io::Result<MutexGuard<'_, Connection>> {
-        self.db.lock().map_err(|e| io::Error::other(e.to_string()))
+    /// The database engine.
+    pub fn backend(&self) -> Backend {
+        self.db.backend()
     }
 
-    /// Puts the jobs a previous process left `queued` or `running` back in
-    /// the queue state and removes the directories of jobs that were never
-    /// accepted. Returns the ids to queue, oldest first.
-    pub fn recover(&self) -> io::Result<Vec<i64>> {
-        let db = self.db()?;
-        db.execute(
-            "UPDATE jobs SET state = ?1, stage = NULL, started_ms = NULL
+    /// Whether the database answers.
+    pub fn ping(&self) -> io::Result<()> {
+        self.db.ping()
+    }
+
+    /// On a process's start. SQLite (one process owns the database): puts
+    /// the jobs a previous process left `running` back in the queue and
+    /// removes the directories of jobs that were never accepted and the
+    /// uploads it was receiving. PostgreSQL (shared): nothing; a job whose
+    /// worker died is claimed again when its lease runs out.
+    pub fn recover(&self) -> io::Result<()> {
+        if self.backend() == Backend::Postgres {
+            return Ok(());
+        }
+        self.db.execute(
+            "UPDATE jobs SET state = ?1, stage = NULL, started_ms = NULL, progress = NULL,
+                 lease_owner = NULL, lease_until_ms = NULL
              WHERE state IN (?1, ?2)",
-            [JobState::Queued, JobState::Running],
-        )
-        .map_err(db_err)?;
-        let ids = |sql: &str, params: &[&dyn rusqlite::ToSql]| -> io::Result<Vec<i64>> {
-            let mut st = db.prepare(sql).map_err(db_err)?;
-            st.query_map(params, |r| r.get(0))
-                .map_err(db_err)?
-                .collect::<rusqlite::Result<_>>()
-                .map_err(db_err)
-        };
-        let pending = ids(
-            "SELECT id FROM jobs WHERE state = ?1 ORDER BY id",
-            &[&JobState::Queued],
+            &[state(JobState::Queued), state(JobState::Running)],
         )?;
         // Inputs are written before their row is committed: a directory
         // without a row belongs to a submission that was never accepted.
-        let known = ids("SELECT id FROM jobs", &[])?;
+        let known: Vec<i64> = self
+            .db
+            .query("SELECT id FROM jobs", &[])?
+            .iter()
+            .filter_map(|r| r.int(0))
+            .collect();
         // Uploads a previous process was receiving were never accepted.
         for entry in std::fs::read_dir(&self.uploads_dir)? {
             let _ = std::fs::remove_dir_all(entry?.path());
@@ -225,7 +221,7 @@ impl Store {
                 let _ = std::fs::remove_dir_all(entry.path());
             }
         }
-        Ok(pending)
+        Ok(())
     }
 
     /// The directory of job `id`'s inputs and results.
@@ -253,21 +249,16 @@ impl Store {
         tenant: Option<&str>,
     ) -> io::Result<(i64, String)> {
         use std::io::Read;
-        let db = self.db()?;
-        // Ids are never reused, not even those of deleted jobs.
-        let id: i64 = db
-            .query_row(
-                "SELECT MAX(COALESCE((SELECT v FROM meta WHERE k = 'next_id'), 1),
-                            COALESCE((SELECT MAX(id) FROM jobs), 0) + 1)",
-                [],
-                |r| r.get(0),
-            )
-            .map_err(db_err)?;
-        db.execute(
-            "INSERT INTO meta (k, v) VALUES ('next_id', ?1) ON CONFLICT(k) DO UPDATE SET v = ?1",
-            [id + 1],
-        )
-        .map_err(db_err)?;
+        // Ids are never reused, not even those of deleted jobs; the update
+        // is atomic, so processes sharing the database never get the same.
+        let id = self
+            .db
+            .query_one(
+                "UPDATE meta SET v = v + 1 WHERE k = 'next_id' RETURNING v - 1",
+                &[],
+            )?
+            .and_then(|r| r.int(0))
+            .ok_or_else(|| io::Error::other("the database has no next_id"))?;
         let dir = self.job_dir(id);
         let _ = std::fs::remove_dir_all(&dir);
         std::fs::create_dir_all(&dir)?;
@@ -287,20 +278,19 @@ impl Store {
         }
         let kind = if glb { "glb" } else { "json" };
         let uid = new_uid();
-        db.execute(
+        self.db.execute(
             "INSERT INTO jobs (id, uid, state, bake, scene_kind, created_ms, tenant)
              VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7)",
-            rusqlite::params![
-                id,
-                uid,
-                JobState::Queued,
-                bake as i64,
-                kind,
-                now_ms(),
-                tenant
+            &[
+                int(id),
+                text(&uid),
+                state(JobState::Queued),
+                int(bake as i64),
+                text(kind),
+                int(now_ms()),
+                Value::from(tenant),
             ],
-        )
-        .map_err(db_err)?;
+        )?;
         Ok((id, uid))
     }
 
@@ -325,128 +315,376 @@ impl Store {
         self.create(&staged, false, tenant)
     }
 
-    /// Records a job's new state, with its error or summary when given;
-    /// stamps the start time on `running` and the finish time on a final
-    /// state. A failure is logged: the job then keeps its previous row.
-    pub fn set_state(&self, id: i64, state: JobState, error: Option<&str>, summary: Option<&str>) {
-        let Ok(db) = self.db.lock() else { return };
-        let finished = state.is_final().then(now_ms);
-        let started = (state == JobState::Running).then(now_ms);
-        let r = db.execute(
-            "UPDATE jobs SET state = ?2, error = COALESCE(?3, error), summary = COALESCE(?4, summary),
-                 finished_ms = COALESCE(?5, finished_ms), started_ms = COALESCE(?6, started_ms)
-             WHERE id = ?1",
-            rusqlite::params![id, state, error, summary, finished, started],
-        );
-        if let Err(e) = r {
-            tracing::error!(job = id, "database update failed: {e}");
+    /// Claims the oldest job that is queued, or running with a lease that
+    /// ran out (its worker died: the job runs again from its inputs), for
+    /// worker `owner` with a lease of `lease_ms`. Returns its id and
+    /// whether it bakes. On PostgreSQL, concurrent claims skip each
+    /// other's rows (`FOR UPDATE SKIP LOCKED`), so no two workers take the
+    /// same job.
+    pub fn claim(&self, owner: &str, lease_ms: i64) -> io::Result<Option<(i64, bool)>> {
+        let now = now_ms();
+        let lock = match self.backend() {
+            Backend::Postgres => "FOR UPDATE SKIP LOCKED",
+            Backend::Sqlite => "",
+        };
+        let row = self.db.query_one(
+            &format!(
+                "UPDATE jobs SET state = ?3, lease_owner = ?1, lease_until_ms = ?2 + ?4,
+                     started_ms = ?2, stage = 'loading', progress = 0, attempts = attempts + 1
+                 WHERE id = (SELECT id FROM jobs
+                             WHERE state = ?5 OR (state = ?3 AND lease_until_ms < ?2)
+                             ORDER BY id LIMIT 1 {lock})
+                 RETURNING id, bake"
+            ),
+            &[
+                text(owner),
+                int(now),
+                state(JobState::Running),
+                int(lease_ms),
+                state(JobState::Queued),
+            ],
+        )?;
+        Ok(row.and_then(|r| Some((r.int(0)?, r.int(1)? != 0))))
+    }
+
+    /// Renews `owner`'s lease of running job `id` for `lease_ms` more and
+    /// records its live stage and progress.
+    pub fn renew(
+        &self,
+        id: i64,
+        owner: &str,
+        lease_ms: i64,
+        stage: &str,
+        progress: f64,
+    ) -> io::Result<Renewal> {
+        let row = self.db.query_one(
+            "UPDATE jobs SET lease_until_ms = ?3, stage = ?4, progress = ?5
+             WHERE id = ?1 AND lease_owner = ?2 AND state = ?6
+             RETURNING cancel_requested",
+            &[
+                int(id),
+                text(owner),
+                int(now_ms() + lease_ms),
+                text(stage),
+                Value::from(progress),
+                state(JobState::Running),
+            ],
+        )?;
+        Ok(Renewal {
+            held: row.is_some(),
+            cancel: row.and_then(|r| r.int(0)).is_some_and(|c| c != 0),
+        })
+    }
+
+    /// Records the final state of job `id` run by `owner`, with its error or
+    /// summary, if `owner` still holds its lease (false otherwise: another
+    /// worker took the job over, and this run's end is not recorded).
+    pub fn finish(
+        &self,
+        id: i64,
+        owner: &str,
+        end: JobState,
+        error: Option<&str>,
+        summary: Option<&str>,
+    ) -> io::Result<bool> {
+        let n = self.db.execute(
+            "UPDATE jobs SET state = ?3, error = ?4, summary = ?5, finished_ms = ?6,
+                 stage = NULL, progress = NULL, lease_owner = NULL, lease_until_ms = NULL, completions = completions + 1
+             WHERE id = ?1 AND lease_owner = ?2 AND state = ?7",
+            &[
+                int(id),
+                text(owner),
+                state(end),
+                Value::from(error),
+                Value::from(summary),
+                int(now_ms()),
+                state(JobState::Running),
+            ],
+        )?;
+        Ok(n == 1)
+    }
+
+    /// Gives job `id`'s lease back (a worker shutting down): the job is
+    /// queued again for any worker.
+    pub fn release(&self, id: i64, owner: &str) -> io::Result<bool> {
+        let n = self.db.execute(
+            "UPDATE jobs SET state = ?3, stage = NULL, progress = NULL, started_ms = NULL,
+                 lease_owner = NULL, lease_until_ms = NULL
+             WHERE id = ?1 AND lease_owner = ?2 AND state = ?4",
+            &[
+                int(id),
+                text(owner),
+                state(JobState::Queued),
+                state(JobState::Running),
+            ],
+        )?;
+        Ok(n == 1)
+    }
+
+    /// Cancels job `id` if it is still queued (true), in one statement, so a
+    /// worker's claim and the cancel never both succeed.
+    pub fn cancel_queued(&self, id: i64) -> io::Result<bool> {
+        let n = self.db.execute(
+            "UPDATE jobs SET state = ?2, error = ?3, finished_ms = ?4 WHERE id = ?1 AND state = ?5",
+            &[
+                int(id),
+                state(JobState::Cancelled),
+                text(crate::job::CANCELLED_BY_REQUEST),
+                int(now_ms()),
+                state(JobState::Queued),
+            ],
+        )?;
+        Ok(n == 1)
+    }
+
+    /// Asks running job `id` to stop: its worker sees it at its next
+    /// lease renewal.
+    pub fn request_cancel(&self, id: i64) -> io::Result<()> {
+        self.db.execute(
+            "UPDATE jobs SET cancel_requested = 1 WHERE id = ?1",
+            &[int(id)],
+        )?;
+        Ok(())
+    }
+
+    /// Records that worker `id` is alive (`/metrics` counts workers seen
+    /// lately).
+    pub fn worker_seen(&self, id: &str) -> io::Result<()> {
+        let now = now_ms();
+        self.db.execute(
+            "INSERT INTO workers (id, started_ms, seen_ms) VALUES (?1, ?2, ?2)
+             ON CONFLICT (id) DO UPDATE SET seen_ms = ?2",
+            &[text(id), int(now)],
+        )?;
+        Ok(())
+    }
+
+    /// Forgets worker `id` (it stopped).
+    pub fn worker_gone(&self, id: &str) -> io::Result<()> {
+        self.db
+            .execute("DELETE FROM workers WHERE id = ?1", &[text(id)])?;
+        Ok(())
+    }
+
+    /// Jobs waiting for a worker.
+    pub fn queued(&self) -> io::Result<usize> {
+        Ok(self
+            .db
+            .query_one(
+                "SELECT COUNT(*) FROM jobs WHERE state = ?1",
+                &[state(JobState::Queued)],
+            )?
+            .and_then(|r| r.int(0))
+            .unwrap_or(0) as usize)
+    }
+
+    /// The figures `/metrics` reports.
+    pub fn figures(&self) -> io::Result<Figures> {
+        let mut f = Figures {
+            buckets: vec![0; DURATION_BUCKETS.len()],
+            ..Figures::default()
+        };
+        for r in self
+            .db
+            .query("SELECT state, COUNT(*) FROM jobs GROUP BY state", &[])?
+        {
+            if let (Some(s), Some(n)) = (r.text(0), r.int(1))
+                && let Some(i) = JobState::ALL.iter().position(|x| x.as_str() == s)
+            {
+                f.by_state[i] = n as u64;
+            }
         }
+        f.workers = self
+            .db
+            .query_one(
+                "SELECT COUNT(*) FROM workers WHERE seen_ms >= ?1",
+                &[int(now_ms() - WORKER_SEEN_MS)],
+            )?
+            .and_then(|r| r.int(0))
+            .unwrap_or(0) as u64;
+        for r in self.db.query(
+            "SELECT finished_ms - started_ms FROM jobs
+             WHERE finished_ms IS NOT NULL AND started_ms IS NOT NULL",
+            &[],
+        )? {
+            let s = r.int(0).unwrap_or(0).max(0) as f64 / 1000.0;
+            f.finished += 1;
+            f.finished_seconds += s;
+            for (b, &le) in f.buckets.iter_mut().zip(&DURATION_BUCKETS) {
+                *b += u64::from(s <= le);
+            }
+        }
+        Ok(f)
     }
 
     /// The row of job `id`; `Ok(None)` when there is no such job (or its
     /// row cannot be read).
     pub fn row(&self, id: i64) -> io::Result<Option<JobRow>> {
-        self.row_where("id = ?1", &[&id])
+        self.row_where("id = ?1", &[int(id)])
     }
 
     /// The row of the job of public id `uid` that belongs to `tenant`
     /// (`None`: to anyone), in one query; `Ok(None)` when there is none.
     pub fn find(&self, uid: &str, tenant: Option<&str>) -> io::Result<Option<JobRow>> {
-        self.row_where("uid = ?1 AND (?2 IS NULL OR tenant = ?2)", &[&uid, &tenant])
+        self.row_where(
+            "uid = ?1 AND (?2 IS NULL OR tenant = ?2)",
+            &[text(uid), Value::from(tenant)],
+        )
     }
 
-    fn row_where(
-        &self,
-        condition: &str,
-        params: &[&dyn rusqlite::ToSql],
-    ) -> io::Result<Option<JobRow>> {
-        let db = self.db()?;
-        Ok(db
-            .query_row(
-                &format!(
-                    "SELECT state, stage, error, summary, bake, created_ms, started_ms, finished_ms,
-                            uid, id
-                     FROM jobs WHERE {condition}"
-                ),
-                params,
-                |r| {
-                    Ok(JobRow {
-                        state: r.get(0)?,
-                        stage: r.get(1)?,
-                        error: r.get(2)?,
-                        summary: r.get(3)?,
-                        bake: r.get::<_, i64>(4)? != 0,
-                        created_ms: r.get(5)?,
-                        started_ms: r.get(6)?,
-                        finished_ms: r.get(7)?,
-                        uid: r.get(8)?,
-                        id: r.get(9)?,
-                    })
-                },
-            )
-            .ok())
+    fn row_where(&self, condition: &str, params: &[Value]) -> io::Result<Option<JobRow>> {
+        let row = self.db.query_one(
+            &format!(
+                "SELECT state, stage, error, summary, bake, created_ms, started_ms, finished_ms,
+                        uid, id, progress
+                 FROM jobs WHERE {condition}"
+            ),
+            params,
+        )?;
+        Ok(row.and_then(|r| {
+            Some(JobRow {
+                state: r.text(0)?.parse().ok()?,
+                stage: r.text(1),
+                error: r.text(2),
+                summary: r.text(3),
+                bake: r.int(4)? != 0,
+                created_ms: r.int(5)?,
+                started_ms: r.int(6),
+                finished_ms: r.int(7),
+                uid: r.text(8)?,
+                id: r.int(9)?,
+                progress: r.real(10),
+            })
+        }))
     }
 
     /// The jobs of `tenant` queued or running.
     pub fn active_jobs(&self, tenant: &str) -> io::Result<usize> {
-        self.db()?
-            .query_row(
+        Ok(self
+            .db
+            .query_one(
                 "SELECT COUNT(*) FROM jobs WHERE tenant = ?1 AND state IN (?2, ?3)",
-                rusqlite::params![tenant, JobState::Queued, JobState::Running],
-                |r| r.get::<_, i64>(0),
-            )
-            .map(|n| n as usize)
-            .map_err(db_err)
+                &[
+                    text(tenant),
+                    state(JobState::Queued),
+                    state(JobState::Running),
+                ],
+            )?
+            .and_then(|r| r.int(0))
+            .unwrap_or(0) as usize)
     }
 
     /// Up to `limit` ids of jobs of `tenant` (`None`: of anyone) greater
     /// than `after`, ascending.
     pub fn ids_after(&self, after: i64, limit: i64, tenant: Option<&str>) -> io::Result<Vec<i64>> {
-        let db = self.db()?;
-        let mut stmt = db
-            .prepare(
+        Ok(self
+            .db
+            .query(
                 "SELECT id FROM jobs WHERE id > ?1 AND (?3 IS NULL OR tenant = ?3)
                  ORDER BY id LIMIT ?2",
-            )
-            .map_err(db_err)?;
-        stmt.query_map(rusqlite::params![after, limit, tenant], |r| r.get(0))
-            .map_err(db_err)?
-            .collect::<rusqlite::Result<_>>()
-            .map_err(db_err)
+                &[int(after), int(limit), Value::from(tenant)],
+            )?
+            .iter()
+            .filter_map(|r| r.int(0))
+            .collect())
     }
 
     /// The jobs that reached a final state before `cutoff_ms` (ms since
     /// the Unix epoch), oldest first.
     pub fn finished_before(&self, cutoff_ms: i64) -> io::Result<Vec<i64>> {
-        let db = self.db()?;
-        let mut stmt = db
-            .prepare(
+        Ok(self
+            .db
+            .query(
                 "SELECT id FROM jobs WHERE finished_ms IS NOT NULL AND finished_ms < ?1
                  AND state IN (?2, ?3, ?4) ORDER BY id",
-            )
-            .map_err(db_err)?;
-        stmt.query_map(
-            rusqlite::params![
-                cutoff_ms,
-                JobState::Succeeded,
-                JobState::Failed,
-                JobState::Cancelled
-            ],
-            |r| r.get(0),
-        )
-        .map_err(db_err)?
-        .collect::<rusqlite::Result<_>>()
-        .map_err(db_err)
+                &[
+                    int(cutoff_ms),
+                    state(JobState::Succeeded),
+                    state(JobState::Failed),
+                    state(JobState::Cancelled),
+                ],
+            )?
+            .iter()
+            .filter_map(|r| r.int(0))
+            .collect())
     }
 
     /// Removes job `id`'s row, then its files.
     pub fn delete(&self, id: i64) -> io::Result<()> {
-        self.db()?
-            .execute("DELETE FROM jobs WHERE id = ?1", [id])
-            .map_err(db_err)?;
+        self.db
+            .execute("DELETE FROM jobs WHERE id = ?1", &[int(id)])?;
         let _ = std::fs::remove_dir_all(self.job_dir(id));
         Ok(())
     }
+
+    /// Sets job `id`'s state as it is, whoever runs it (tests).
+    #[cfg(test)]
+    pub fn set_state(&self, id: i64, end: JobState) {
+        let _ = self.db.execute(
+            "UPDATE jobs SET state = ?2 WHERE id = ?1",
+            &[int(id), state(end)],
+        );
+    }
+}
+
+/// The tables of a SQLite database from before migrations existed, and
+/// the columns its older versions lacked (their own small upgrades).
+fn sqlite_setup(db: &rusqlite::Connection) -> io::Result<()> {
+    db.execute_batch(
+        "CREATE TABLE IF NOT EXISTS jobs (
+             id INTEGER PRIMARY KEY,
+             state TEXT NOT NULL,
+             stage TEXT,
+             error TEXT,
+             summary TEXT,
+             bake INTEGER NOT NULL,
+             scene_kind TEXT NOT NULL,
+             created_ms INTEGER NOT NULL,
+             started_ms INTEGER,
+             finished_ms INTEGER
+         );
+         CREATE TABLE IF NOT EXISTS meta (k TEXT PRIMARY KEY, v INTEGER NOT NULL);",
+    )
+    .map_err(db_err)?;
+    // Public ids: a database of an older version has none; its jobs get
+    // one each (their old numeric ids are then 404 like any unknown id).
+    let has = |column: &str| {
+        db.prepare("SELECT 1 FROM pragma_table_info('jobs') WHERE name = ?1")
+            .and_then(|mut s| s.exists([column]))
+            .map_err(db_err)
+    };
+    if !has("uid")? {
+        db.execute_batch("ALTER TABLE jobs ADD COLUMN uid TEXT")
+            .map_err(db_err)?;
+    }
+    let missing: Vec<i64> = db
+        .prepare("SELECT id FROM jobs WHERE uid IS NULL")
+        .and_then(|mut s| s.query_map([], |r| r.get(0))?.collect())
+        .map_err(db_err)?;
+    for id in missing {
+        db.execute(
+            "UPDATE jobs SET uid = ?2 WHERE id = ?1",
+            rusqlite::params![id, new_uid()],
+        )
+        .map_err(db_err)?;
+    }
+    db.execute_batch("CREATE UNIQUE INDEX IF NOT EXISTS jobs_uid ON jobs (uid)")
+        .map_err(db_err)?;
+    // Tenants: the jobs of an older version, or of a server without
+    // tokens, have none (only a server without tokens shows them).
+    if !has("tenant")? {
+        db.execute_batch("ALTER TABLE jobs ADD COLUMN tenant TEXT")
+            .map_err(db_err)?;
+    }
+    db.execute_batch("CREATE INDEX IF NOT EXISTS jobs_tenant ON jobs (tenant, id)")
+        .map_err(db_err)?;
+    // The next id of versions that kept it only after the first job.
+    db.execute_batch(
+        "INSERT INTO meta (k, v) SELECT 'next_id', COALESCE(MAX(id), 0) + 1 FROM jobs
+             WHERE true ON CONFLICT (k) DO UPDATE SET v = MAX(v, excluded.v)",
+    )
+    .map_err(db_err)?;
+    Ok(())
 }
 
 #[cfg(test)]
@@ -467,7 +705,7 @@ mod tests {
     fn jobs_have_random_public_ids_and_older_databases_get_them() {
         let dir = temp_dir("uid");
         {
-            let db = Connection::open(dir.join("jobs.sqlite")).unwrap();
+            let db = rusqlite::Connection::open(dir.join("jobs.sqlite")).unwrap();
             db.execute_batch(
                 "CREATE TABLE jobs (
                      id INTEGER PRIMARY KEY, state TEXT NOT NULL, stage TEXT, error TEXT,
@@ -478,7 +716,7 @@ mod tests {
             )
             .unwrap();
         }
-        let store = Store::open(&dir).unwrap();
+        let store = Store::open(&dir, None).unwrap();
         let old = store.row(1).unwrap().unwrap().uid;
         assert_eq!(
             uuid::Uuid::parse_str(&old).unwrap().get_version(),
@@ -494,7 +732,7 @@ mod tests {
         assert_eq!(store.row(2).unwrap().unwrap().uid, ua);
         // Reopening keeps every id.
         drop(store);
-        let store = Store::open(&dir).unwrap();
+        let store = Store::open(&dir, None).unwrap();
         assert_eq!(store.find(&old, None).unwrap().map(|r| r.id), Some(1));
         assert_eq!(store.find(&ua, None).unwrap().map(|r| r.id), Some(2));
         let _ = std::fs::remove_dir_all(&dir);
@@ -505,7 +743,7 @@ mod tests {
     #[test]
     fn tenants_see_only_their_jobs() {
         let dir = temp_dir("tenant");
-        let store = Store::open(&dir).unwrap();
+        let store = Store::open(&dir, None).unwrap();
         let (a, ua) = store
             .create_from_bytes(b"{}", b"{}", None, Some("a"))
             .unwrap();
@@ -524,7 +762,7 @@ mod tests {
         assert_eq!(store.ids_after(a, 10, Some("a")).unwrap(), vec![c]);
         assert_eq!(store.ids_after(0, 10, None).unwrap(), vec![a, b, c]);
         assert_eq!(store.active_jobs("a").unwrap(), 2);
-        store.set_state(c, JobState::Succeeded, None, None);
+        store.set_state(c, JobState::Succeeded);
         assert_eq!(store.active_jobs("a").unwrap(), 1);
         assert_eq!(store.active_jobs("nobody").unwrap(), 0);
         let _ = std::fs::remove_dir_all(&dir);

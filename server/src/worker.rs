@@ -1,49 +1,52 @@
-//! The job queue and the worker threads: each worker takes the next queued
-//! job and runs it off the async runtime, publishing its live stage and
-//! progress and watching its cancel flag.
+//! The worker threads: each claims the oldest queued job from the database
+//! under a lease (see [`crate::store::Store::claim`]) and runs it off the
+//! async runtime, publishing its live stage and progress, renewing the
+//! lease and watching its cancel flag. The same loop runs in the
+//! single-process server and in `impostor-server worker` processes.
 
 use std::collections::HashMap;
-use std::sync::atomic::{AtomicBool, AtomicU8, AtomicUsize, Ordering};
-use std::sync::{Arc, Mutex, mpsc};
+use std::sync::atomic::{AtomicBool, AtomicU8, Ordering};
+use std::sync::{Arc, Condvar, Mutex, mpsc};
 use std::time::Duration;
 
 use crate::AppState;
 use crate::job::{CANCELLED_BY_REQUEST, JobState};
 use crate::pipeline::{RunOptions, run_job};
 
-/// The ids of the jobs waiting for a worker, in submission order.
-pub(crate) struct Queue {
-    tx: Mutex<mpsc::Sender<i64>>,
-    waiting: AtomicUsize,
+/// Wakes idle workers of this process when a job is submitted here; they
+/// also look at the database every [`POLL`] for jobs submitted elsewhere
+/// (other API processes) or leases that ran out.
+#[derive(Default)]
+pub(crate) struct Wakeup {
+    submitted: Mutex<u64>,
+    cv: Condvar,
 }
 
-impl Queue {
-    /// A queue and the receiving end its workers share.
-    pub fn new() -> (Queue, mpsc::Receiver<i64>) {
-        let (tx, rx) = mpsc::channel();
-        let queue = Queue {
-            tx: Mutex::new(tx),
-            waiting: AtomicUsize::new(0),
-        };
-        (queue, rx)
+/// How often an idle worker looks for a job.
+pub(crate) const POLL: Duration = Duration::from_millis(500);
+
+impl Wakeup {
+    /// A job was submitted.
+    pub fn notify(&self) {
+        if let Ok(mut n) = self.submitted.lock() {
+            *n += 1;
+        }
+        self.cv.notify_all();
     }
 
-    /// Queues job `id`.
-    pub fn push(&self, id: i64) {
-        self.waiting.fetch_add(1, Ordering::SeqCst);
-        if let Ok(tx) = self.tx.lock() {
-            let _ = tx.send(id);
+    /// Waits until a job is submitted after `seen` submissions, or `POLL`.
+    fn wait(&self, seen: u64) -> u64 {
+        let Ok(n) = self.submitted.lock() else {
+            return seen;
+        };
+        match self.cv.wait_timeout_while(n, POLL, |n| *n == seen) {
+            Ok((n, _)) => *n,
+            Err(_) => seen,
         }
     }
 
-    /// Counts job ids a worker took from the receiving end.
-    fn taken(&self) {
-        self.waiting.fetch_sub(1, Ordering::SeqCst);
-    }
-
-    /// Jobs queued and not yet taken by a worker.
-    pub fn waiting(&self) -> usize {
-        self.waiting.load(Ordering::SeqCst)
+    fn count(&self) -> u64 {
+        self.submitted.lock().map_or(0, |n| *n)
     }
 }
 
@@ -63,6 +66,12 @@ pub(crate) enum Stopped {
     ByRequest = 1,
     /// It ran past the server's `--job-max-seconds`.
     TimeLimit = 2,
+    /// Its worker lost the lease (it could not renew it in time, and
+    /// another worker may have taken the job over): its end is not recorded.
+    LeaseLost = 3,
+    /// Its worker is shutting down: the lease is given back and the job
+    /// queued again.
+    Shutdown = 4,
 }
 
 /// Asks a running job to stop: the flag the optimizer checks, and the
@@ -88,6 +97,8 @@ impl Stop {
         match self.reason.load(Ordering::SeqCst) {
             1 => Stopped::ByRequest,
             2 => Stopped::TimeLimit,
+            3 => Stopped::LeaseLost,
+            4 => Stopped::Shutdown,
             _ => Stopped::No,
         }
     }
@@ -146,49 +157,110 @@ impl LiveJobs {
             live.remove(&id);
         }
     }
+
+    /// Asks every running job to stop for `why`.
+    fn stop_all(&self, why: Stopped) {
+        if let Ok(live) = self.0.lock() {
+            for l in live.values() {
+                l.stop.ask(why);
+            }
+        }
+    }
 }
 
-/// Starts `count` worker threads (at least one) that take job ids from `rx`
-/// until the queue's sending end is gone.
+/// This process's worker name: host, process id and a random suffix
+/// (a process restarted with the same id is another worker).
+pub(crate) fn process_name() -> String {
+    let host = std::fs::read_to_string("/proc/sys/kernel/hostname")
+        .map(|h| h.trim().to_string())
+        .unwrap_or_else(|_| "host".into());
+    let tag = uuid::Uuid::new_v4().simple().to_string();
+    format!("{host}:{}:{}", std::process::id(), &tag[..8])
+}
+
+/// Starts `count` worker threads that claim jobs from the database until
+/// [`AppState::shutdown`]; returns their handles.
 pub(crate) fn spawn_workers(
     state: &AppState,
-    rx: mpsc::Receiver<i64>,
     count: usize,
-) -> std::io::Result<()> {
-    let rx = Arc::new(Mutex::new(rx));
-    for w in 0..count {
-        let st = state.clone();
-        let rx = rx.clone();
-        std::thread::Builder::new()
-            .name(format!("worker-{w}"))
-            .spawn(move || {
-                loop {
-                    let next = rx.lock().map(|r| r.recv());
-                    match next {
-                        Ok(Ok(id)) => {
-                            st.0.queue.taken();
-                            run(&st, id);
-                        }
-                        _ => break,
-                    }
-                }
-            })?;
-    }
-    Ok(())
+) -> std::io::Result<Vec<std::thread::JoinHandle<()>>> {
+    (0..count)
+        .map(|w| {
+            let st = state.clone();
+            let owner = format!("{}/{w}", st.0.name);
+            std::thread::Builder::new()
+                .name(format!("worker-{w}"))
+                .spawn(move || work(&st, &owner))
+        })
+        .collect()
 }
 
-/// Runs job `id` on the calling (worker) thread and stores its final state.
-/// A job no longer queued (cancelled or deleted meanwhile) is skipped.
-fn run(st: &AppState, id: i64) {
+/// One worker's loop: claim the oldest job, run it, repeat; wait for a
+/// submission (or the next poll) when there is none.
+fn work(st: &AppState, owner: &str) {
     let store = &st.0.store;
-    let bake = match store.row(id) {
-        Ok(Some(row)) if row.state == JobState::Queued => row.bake,
-        _ => return,
-    };
+    let wakeup = &st.0.wakeup;
+    let lease_ms = st.0.cfg.lease.as_millis() as i64;
+    let mut seen = wakeup.count();
+    while !st.0.stopping.load(Ordering::SeqCst) {
+        if let Err(e) = store.worker_seen(owner) {
+            tracing::warn!(worker = owner, "database: {e}");
+        }
+        match store.claim(owner, lease_ms) {
+            Ok(Some((id, bake))) => run(st, owner, id, bake),
+            Ok(None) => seen = wakeup.wait(seen),
+            Err(e) => {
+                tracing::warn!(worker = owner, "cannot claim a job: {e}");
+                std::thread::sleep(POLL);
+            }
+        }
+    }
+    let _ = store.worker_gone(owner);
+}
+
+/// Renews the lease of job `id` every third of the lease until `ended`
+/// says the run is over, recording its live stage and progress; asks the
+/// run to stop when a `DELETE` asked for it or the lease was lost.
+fn keep_lease(
+    st: &AppState,
+    owner: &str,
+    id: i64,
+    stop: &Stop,
+    ended: &mpsc::Receiver<()>,
+) {
+    let every = st.0.cfg.lease / 3;
+    let lease_ms = st.0.cfg.lease.as_millis() as i64;
+    while ended.recv_timeout(every) == Err(mpsc::RecvTimeoutError::Timeout) {
+        let (stage, progress) = st
+            .0
+            .live
+            .progress(id)
+            .unwrap_or_else(|| ("loading".into(), 0.0));
+        match st.0.store.renew(id, owner, lease_ms, &stage, progress) {
+            Ok(r) if !r.held => {
+                tracing::warn!(job = id, worker = owner, "lease lost");
+                stop.ask(Stopped::LeaseLost);
+                return;
+            }
+            Ok(r) => {
+                if r.cancel {
+                    stop.ask(Stopped::ByRequest);
+                }
+                let _ = st.0.store.worker_seen(owner);
+            }
+            // The lease runs out unless a later renewal gets through.
+            Err(e) => tracing::warn!(job = id, "cannot renew the lease: {e}"),
+        }
+    }
+}
+
+/// Runs job `id`, claimed by `owner`, on the calling (worker) thread and
+/// records its final state while `owner` still holds its lease.
+fn run(st: &AppState, owner: &str, id: i64, bake: bool) {
+    let store = &st.0.store;
     let live = &st.0.live;
     let stop = live.start(id);
-    store.set_state(id, JobState::Running, None, None);
-    tracing::info!(job = id, "running");
+    tracing::info!(job = id, worker = owner, "running");
     let progress = |stage: &str, f: f64| live.update(id, stage, f);
     let opts = RunOptions {
         bake,
@@ -215,22 +287,53 @@ fn run(st: &AppState, id: i64) {
             .inspect_err(|e| tracing::warn!(job = id, "no time limit: {e}"))
             .ok()
     });
-    // A panic in the optimizer fails this job, not the worker.
-    let outcome = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| run_job(&dir, &opts)));
+    let (lease_end, lease_watch) = mpsc::channel::<()>();
+    let outcome = std::thread::scope(|s| {
+        let stop = &stop;
+        let keeper = s.spawn(move || keep_lease(st, owner, id, stop, &lease_watch));
+        // A panic in the optimizer fails this job, not the worker.
+        let outcome =
+            std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| run_job(&dir, &opts)));
+        drop(lease_end);
+        let _ = keeper.join();
+        outcome
+    });
     let stopped = stop.reason();
     drop(ended);
     if let Some(w) = watchdog {
         let _ = w.join();
     }
     live.finish(id);
-    let (state, error, summary) = final_state(outcome, stopped, limit.unwrap_or(0));
-    match state {
-        JobState::Succeeded => tracing::info!(job = id, "succeeded"),
-        JobState::Cancelled => tracing::info!(job = id, "cancelled"),
-        _ => tracing::warn!(job = id, "failed: {}", error.as_deref().unwrap_or("")),
+    match stopped {
+        Stopped::LeaseLost => {
+            tracing::warn!(job = id, "run discarded: the lease was lost");
+        }
+        Stopped::Shutdown => match store.release(id, owner) {
+            Ok(_) => tracing::info!(job = id, "lease released: queued again"),
+            Err(e) => tracing::warn!(job = id, "cannot release the lease (it runs out): {e}"),
+        },
+        _ => {
+            let (state, error, summary) = final_state(outcome, stopped, limit.unwrap_or(0));
+            match store.finish(id, owner, state, error.as_deref(), summary.as_deref()) {
+                Ok(true) => match state {
+                    JobState::Succeeded => tracing::info!(job = id, "succeeded"),
+                    JobState::Cancelled => tracing::info!(job = id, "cancelled"),
+                    _ => tracing::warn!(job = id, "failed: {}", error.as_deref().unwrap_or("")),
+                },
+                Ok(false) => tracing::warn!(job = id, "run discarded: the lease was lost"),
+                Err(e) => tracing::error!(job = id, "database update failed: {e}"),
+            }
+        }
     }
-    store.set_state(id, state, error.as_deref(), summary.as_deref());
     release_memory();
+}
+
+/// Stops the workers of `st`: no more claims; running jobs are stopped and
+/// their leases given back (queued again for any worker).
+pub(crate) fn shutdown(st: &AppState) {
+    st.0.stopping.store(true, Ordering::SeqCst);
+    st.0.live.stop_all(Stopped::Shutdown);
+    st.0.wakeup.notify();
 }
 
 /// Gives the heap a finished job freed back to the system: glibc keeps
@@ -269,7 +372,13 @@ fn final_state(
         )
     };
     match outcome {
-        _ if stopped == Stopped::ByRequest => cancelled(),
+        _ if matches!(
+            stopped,
+            Stopped::ByRequest | Stopped::LeaseLost | Stopped::Shutdown
+        ) =>
+        {
+            cancelled()
+        }
         _ if stopped == Stopped::TimeLimit => (
             JobState::Failed,
             Some(format!(

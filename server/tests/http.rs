@@ -672,7 +672,8 @@ async fn openapi_documents_every_route_and_every_reference_resolves() {
     let results: &[&str] = &["200", "401", "404", "409", "429", "500"];
     let one: &[&str] = &["200", "401", "404", "429", "500"];
     let routes: &[(&str, &str, &[&str])] = &[
-        ("/healthz", "get", &["200"]),
+        ("/healthz", "get", &["200", "500", "503"]),
+        ("/metrics", "get", &["200", "500"]),
         ("/openapi.json", "get", &["200"]),
         ("/v1/jobs", "get", &["200", "401", "429", "500"]),
         (

@@ -162,6 +162,30 @@ impl OperationOutput for HtmlPage {
     }
 }
 
+/// Metrics in Prometheus' text format.
+pub struct MetricsText(pub String);
+
+impl IntoResponse for MetricsText {
+    fn into_response(self) -> Response {
+        with_type("text/plain; version=0.0.4; charset=utf-8", self.0.into_bytes())
+    }
+}
+
+impl OperationOutput for MetricsText {
+    type Inner = String;
+
+    fn inferred_responses(
+        _ctx: &mut GenContext,
+        _operation: &mut Operation,
+    ) -> Vec<(Option<StatusCode>, DocResponse)> {
+        ok_response(
+            "metrics in Prometheus' text exposition format",
+            "text/plain",
+            Some(schemars::json_schema!({"type": "string"})),
+        )
+    }
+}
+
 /// The OpenAPI document, serialized once when the router is built.
 #[derive(Clone)]
 pub struct OpenApiJson(pub Bytes);

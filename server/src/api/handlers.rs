@@ -12,11 +12,11 @@ use optimizer::api::placement::Placement;
 
 use axum::response::IntoResponse;
 
-use super::bodies::{EventStream, Glb, HtmlPage, OpenApiJson, StoredJson};
+use super::bodies::{EventStream, Glb, HtmlPage, MetricsText, OpenApiJson, StoredJson};
 use super::extract::{Caller, JobId, Submission};
 use super::types::{Accepted, DeleteAnswer, DeleteOutcome, Health, JobEvent, JobList, JobStatus};
 use crate::error::ApiError;
-use crate::job::{CANCELLED_BY_REQUEST, JobState};
+use crate::job::JobState;
 use crate::pipeline::check_submission;
 use crate::store::{self, JobRow};
 use crate::{Access, AppState, OPTIMIZER_VERSION};
@@ -63,7 +63,7 @@ fn accept(st: &AppState, access: &Access, sub: Submission) -> Result<String, Api
             .create(&sub.staged, sub.bake, tenant)
             .map_err(ApiError::internal)?;
     tracing::info!(job = id, uid, tenant, "accepted");
-    st.0.queue.push(id);
+    st.0.wakeup.notify();
     Ok(uid)
 }
 
@@ -99,6 +99,8 @@ async fn find(st: &AppState, access: &Access, uid: &str) -> Result<JobRow, ApiEr
 fn job_status(st: &AppState, row: JobRow) -> JobStatus {
     let (stage, progress) = match st.0.live.progress(row.id) {
         Some((stage, progress)) => (Some(stage), progress),
+        // Run by a worker of another process: its last renewal.
+        None if row.state == JobState::Running => (row.stage, row.progress.unwrap_or(0.0)),
         None => (
             row.stage,
             if row.state == JobState::Succeeded {
@@ -329,14 +331,17 @@ pub(crate) async fn delete(
     // Removing a job's folder may take a while: on the blocking pool.
     let outcome = blocking(&st, move |st| {
         Ok(match row.state {
-            JobState::Queued => {
-                // The worker skips a job that is no longer queued.
-                st.0.store
-                    .set_state(id, JobState::Cancelled, Some(CANCELLED_BY_REQUEST), None);
+            // One statement: a worker's claim and the cancel never both win.
+            JobState::Queued if st.0.store.cancel_queued(id).map_err(ApiError::internal)? => {
                 DeleteOutcome::Cancelled
             }
-            JobState::Running => {
+            // Running here or in another process (or claimed meanwhile):
+            // its worker sees the request at its next lease renewal.
+            JobState::Queued | JobState::Running => {
                 st.0.live.cancel(id);
+                st.0.store
+                    .request_cancel(id)
+                    .map_err(ApiError::internal)?;
                 DeleteOutcome::Cancelling
             }
             JobState::Succeeded | JobState::Failed | JobState::Cancelled => {
@@ -352,12 +357,68 @@ pub(crate) async fn delete(
     }))
 }
 
-/// `GET /healthz`.
-pub(crate) async fn healthz() -> Json<Health> {
-    Json(Health {
-        status: "ok",
-        version: OPTIMIZER_VERSION,
+/// `GET /healthz`: the service and its database answer (503 when the
+/// database does not).
+pub(crate) async fn healthz(State(st): State<AppState>) -> Result<Json<Health>, ApiError> {
+    blocking(&st, |st| {
+        st.0.store.ping().map_err(|e| {
+            tracing::warn!("health: the database does not answer: {e}");
+            ApiError::new(
+                StatusCode::SERVICE_UNAVAILABLE,
+                "the job database does not answer",
+            )
+        })?;
+        Ok(Json(Health {
+            status: "ok",
+            version: OPTIMIZER_VERSION,
+            database: match st.0.store.backend() {
+                crate::db::Backend::Sqlite => "sqlite",
+                crate::db::Backend::Postgres => "postgres",
+            },
+        }))
     })
+    .await
+}
+
+/// `GET /metrics`: queue depth, jobs per state, workers seen in the last
+/// minute and finished jobs' durations, in Prometheus' text format.
+pub(crate) async fn metrics(State(st): State<AppState>) -> Result<MetricsText, ApiError> {
+    let f = blocking(&st, |st| st.0.store.figures().map_err(ApiError::internal)).await?;
+    Ok(MetricsText(metrics_text(&f)))
+}
+
+/// The text of `/metrics` for `f`.
+fn metrics_text(f: &store::Figures) -> String {
+    use std::fmt::Write;
+    let mut out = String::new();
+    let by = |s: JobState| f.by_state[JobState::ALL.iter().position(|&x| x == s).unwrap_or(0)];
+    let _ = writeln!(out, "# HELP impostor_queue_depth Jobs waiting for a worker.");
+    let _ = writeln!(out, "# TYPE impostor_queue_depth gauge");
+    let _ = writeln!(out, "impostor_queue_depth {}", by(JobState::Queued));
+    let _ = writeln!(out, "# HELP impostor_jobs_running Jobs a worker is running.");
+    let _ = writeln!(out, "# TYPE impostor_jobs_running gauge");
+    let _ = writeln!(out, "impostor_jobs_running {}", by(JobState::Running));
+    let _ = writeln!(out, "# HELP impostor_jobs Jobs in the database, by state.");
+    let _ = writeln!(out, "# TYPE impostor_jobs gauge");
+    for (s, n) in JobState::ALL.iter().zip(f.by_state) {
+        let _ = writeln!(out, "impostor_jobs{{state=\"{s}\"}} {n}");
+    }
+    let _ = writeln!(
+        out,
+        "# HELP impostor_workers Worker threads (of every process) seen in the last minute."
+    );
+    let _ = writeln!(out, "# TYPE impostor_workers gauge");
+    let _ = writeln!(out, "impostor_workers {}", f.workers);
+    let name = "impostor_job_duration_seconds";
+    let _ = writeln!(out, "# HELP {name} Finished jobs' run time, start to end.");
+    let _ = writeln!(out, "# TYPE {name} histogram");
+    for (le, n) in store::DURATION_BUCKETS.iter().zip(&f.buckets) {
+        let _ = writeln!(out, "{name}_bucket{{le=\"{le}\"}} {n}");
+    }
+    let _ = writeln!(out, "{name}_bucket{{le=\"+Inf\"}} {}", f.finished);
+    let _ = writeln!(out, "{name}_sum {}", f.finished_seconds);
+    let _ = writeln!(out, "{name}_count {}", f.finished);
+    out
 }
 
 /// `GET /openapi.json`.

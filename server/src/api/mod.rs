@@ -86,7 +86,23 @@ fn routes() -> ApiRouter<AppState> {
         .api_route(
             "/healthz",
             get_with(handlers::healthz, |op| {
-                op.id("health").tag(SERVICE).summary("liveness")
+                op.id("health")
+                    .tag(SERVICE)
+                    .summary("liveness: the service and its database answer")
+                    .response_with::<503, ApiError, _>(|r| {
+                        r.description("the job database does not answer")
+                    })
+            }),
+        )
+        .api_route(
+            "/metrics",
+            get_with(handlers::metrics, |op| {
+                op.id("metrics")
+                    .tag(SERVICE)
+                    .summary("queue depth, running jobs, workers, job durations (Prometheus)")
+                    .response_with::<500, ApiError, _>(|r| {
+                        r.description("the job database cannot be read")
+                    })
             }),
         )
         .api_route(

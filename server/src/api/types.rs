@@ -168,7 +168,9 @@ pub struct DeleteAnswer {
 /// The service is up.
 #[derive(Debug, Serialize, JsonSchema)]
 pub struct Health {
-    /// Always `ok`.
+    /// The job database's engine, which answered: `sqlite` or `postgres`.
+    pub database: &'static str,
+    /// Always `ok` (a database that does not answer is a 503).
     pub status: &'static str,
     /// Version of the optimizer library the service runs.
     pub version: &'static str,
@@ -217,6 +219,7 @@ mod tests {
             state: DeleteOutcome::Cancelling,
         });
         assert_sorted(&Health {
+            database: "sqlite",
             status: "ok",
             version: "0",
         });
