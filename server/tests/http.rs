@@ -715,7 +715,7 @@ async fn openapi_documents_every_route_and_every_reference_resolves() {
     }
     assert_eq!(
         doc["paths"].as_object().unwrap().len(),
-        9,
+        10,
         "undocumented or unknown paths"
     );
 
