@@ -93,10 +93,48 @@ impl Row {
     }
 }
 
-/// A connection to the job database.
+/// A connection to the job database. A PostgreSQL connection that broke
+/// (the server restarted, the network failed) is opened again by the next
+/// statement.
 pub(crate) enum Db {
     Sqlite(Mutex<rusqlite::Connection>),
-    Postgres(Mutex<postgres::Client>),
+    Postgres {
+        url: String,
+        client: Mutex<Option<postgres::Client>>,
+    },
+}
+
+impl Drop for Db {
+    /// The PostgreSQL client closes its connection by blocking on a runtime
+    /// of its own, which must not happen on an async runtime's thread: it
+    /// is dropped on a thread of its own there.
+    fn drop(&mut self) {
+        if let Db::Postgres { client, .. } = self
+            && let Ok(c) = client.get_mut()
+            && let Some(c) = c.take()
+            && tokio::runtime::Handle::try_current().is_ok()
+        {
+            let _ = std::thread::Builder::new()
+                .name("db-close".into())
+                .spawn(move || drop(c));
+        }
+    }
+}
+
+/// The PostgreSQL client of `slot`, connected to `url` anew when it has
+/// none or its connection is closed.
+fn pg_client<'a>(
+    slot: &'a mut Option<postgres::Client>,
+    url: &str,
+) -> io::Result<&'a mut postgres::Client> {
+    if slot.as_ref().is_none_or(postgres::Client::is_closed) {
+        *slot = Some(
+            postgres::Client::connect(url, postgres::NoTls)
+                .map_err(|e| io::Error::other(format!("cannot connect to the database: {e}")))?,
+        );
+    }
+    slot.as_mut()
+        .ok_or_else(|| io::Error::other("no database connection"))
 }
 
 /// The migrations of each engine, in order: (version, SQL).
@@ -153,10 +191,12 @@ impl Db {
     ) -> io::Result<Db> {
         match url {
             Some(u) if u.starts_with("postgres://") || u.starts_with("postgresql://") => {
-                let client = postgres::Client::connect(u, postgres::NoTls).map_err(|e| {
-                    io::Error::other(format!("cannot connect to the database: {e}"))
-                })?;
-                let db = Db::Postgres(Mutex::new(client));
+                let mut slot = None;
+                pg_client(&mut slot, u)?;
+                let db = Db::Postgres {
+                    url: u.to_string(),
+                    client: Mutex::new(slot),
+                };
                 db.migrate()?;
                 Ok(db)
             }
@@ -188,7 +228,7 @@ impl Db {
     pub fn backend(&self) -> Backend {
         match self {
             Db::Sqlite(_) => Backend::Sqlite,
-            Db::Postgres(_) => Backend::Postgres,
+            Db::Postgres { .. } => Backend::Postgres,
         }
     }
 
@@ -222,8 +262,9 @@ impl Db {
                     tx.commit().map_err(sqlite_err)?;
                 }
             }
-            Db::Postgres(c) => {
-                let mut c = Self::lock(c)?;
+            Db::Postgres { url, client } => {
+                let mut slot = Self::lock(client)?;
+                let c = pg_client(&mut slot, url)?;
                 for &(version, sql) in POSTGRES_MIGRATIONS {
                     let mut tx = c.transaction().map_err(pg_err)?;
                     // One process at a time (held to the end of the transaction).
@@ -256,11 +297,12 @@ impl Db {
                 .execute(sql, rusqlite::params_from_iter(params))
                 .map(|n| n as u64)
                 .map_err(sqlite_err),
-            Db::Postgres(c) => {
+            Db::Postgres { url, client } => {
                 let boxed: Vec<_> = params.iter().map(pg_param).collect();
                 let refs: Vec<&(dyn postgres::types::ToSql + Sync)> =
                     boxed.iter().map(|b| b.as_ref()).collect();
-                Self::lock(c)?
+                let mut slot = Self::lock(client)?;
+                pg_client(&mut slot, url)?
                     .execute(&to_postgres(sql), &refs)
                     .map_err(pg_err)
             }
@@ -296,12 +338,13 @@ impl Db {
                     .map_err(sqlite_err)?;
                 Ok(rows)
             }
-            Db::Postgres(c) => {
+            Db::Postgres { url, client } => {
                 use postgres::types::Type;
                 let boxed: Vec<_> = params.iter().map(pg_param).collect();
                 let refs: Vec<&(dyn postgres::types::ToSql + Sync)> =
                     boxed.iter().map(|b| b.as_ref()).collect();
-                let rows = Self::lock(c)?
+                let mut slot = Self::lock(client)?;
+                let rows = pg_client(&mut slot, url)?
                     .query(&to_postgres(sql), &refs)
                     .map_err(pg_err)?;
                 rows.iter()

@@ -527,7 +527,7 @@ impl Store {
     /// (`None`: to anyone), in one query; `Ok(None)` when there is none.
     pub fn find(&self, uid: &str, tenant: Option<&str>) -> io::Result<Option<JobRow>> {
         self.row_where(
-            "uid = ?1 AND (?2 IS NULL OR tenant = ?2)",
+            "uid = ?1 AND (CAST(?2 AS TEXT) IS NULL OR tenant = ?2)",
             &[text(uid), Value::from(tenant)],
         )
     }
@@ -580,7 +580,7 @@ impl Store {
         Ok(self
             .db
             .query(
-                "SELECT id FROM jobs WHERE id > ?1 AND (?3 IS NULL OR tenant = ?3)
+                "SELECT id FROM jobs WHERE id > ?1 AND (CAST(?3 AS TEXT) IS NULL OR tenant = ?3)
                  ORDER BY id LIMIT ?2",
                 &[int(after), int(limit), Value::from(tenant)],
             )?

@@ -202,8 +202,14 @@ async fn summary_and_glb_jobs_succeed_with_the_cli_bytes() {
     assert_eq!(s, 200);
     assert_eq!(list["jobs"].as_array().unwrap().len(), 1);
     assert_eq!(list["next_after"], id1);
-    let (s, _) = get_json(addr, "/healthz").await;
+    let (s, health) = get_json(addr, "/healthz").await;
     assert_eq!(s, 200);
+    // The backend these tests run on (IMPOSTOR_TEST_DATABASE).
+    let backend = match std::env::var("IMPOSTOR_TEST_DATABASE").as_deref() {
+        Ok("postgres") => "postgres",
+        _ => "sqlite",
+    };
+    assert_eq!(health["database"], backend, "{health}");
 
     // Deleting a finished job removes it.
     let (s, _) = request(addr, "DELETE", &format!("/v1/jobs/{id2}"), None, b"").await;

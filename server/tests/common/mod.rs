@@ -2,6 +2,8 @@
 
 #[allow(dead_code)] // the restart test talks to a child process without it
 pub mod client;
+#[allow(dead_code)]
+pub mod postgres;
 
 /// The placement the command line writes for `scene` (GLB or summary bytes)
 /// and `job` (JSON bytes): what the service must store byte for byte.
@@ -26,10 +28,20 @@ pub fn cli_placement(scene: &[u8], job: &[u8]) -> Vec<u8> {
 }
 
 /// Starts the service with `cfg` on a free loopback port, in this test's
-/// runtime; returns its address.
+/// runtime; returns its address. With `IMPOSTOR_TEST_DATABASE=postgres`,
+/// on a database of its own in the tests' PostgreSQL cluster.
 #[allow(dead_code)] // the restart test runs the real binary instead
-pub async fn start(cfg: server::Config) -> std::net::SocketAddr {
-    let state = server::AppState::open(cfg).unwrap();
+pub async fn start(mut cfg: server::Config) -> std::net::SocketAddr {
+    // The database clients block: on a thread of their own, off the runtime.
+    let state = std::thread::spawn(move || {
+        if cfg.database.is_none() {
+            cfg.database = postgres::database_for_tests();
+        }
+        server::AppState::open(cfg)
+    })
+    .join()
+    .unwrap()
+    .unwrap();
     let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
     let addr = listener.local_addr().unwrap();
     tokio::spawn(server::run(listener, state, std::future::pending()));
