@@ -100,7 +100,7 @@ pub(crate) enum Db {
     Sqlite(Mutex<rusqlite::Connection>),
     Postgres {
         url: String,
-        client: Mutex<Option<postgres::Client>>,
+        client: Box<Mutex<Option<postgres::Client>>>,
     },
 }
 
@@ -138,7 +138,8 @@ fn pg_client<'a>(
 }
 
 /// The migrations of each engine, in order: (version, SQL).
-const SQLITE_MIGRATIONS: &[(i64, &str)] = &[(1, include_str!("../migrations/sqlite/0001_leases.sql"))];
+const SQLITE_MIGRATIONS: &[(i64, &str)] =
+    &[(1, include_str!("../migrations/sqlite/0001_leases.sql"))];
 const POSTGRES_MIGRATIONS: &[(i64, &str)] =
     &[(1, include_str!("../migrations/postgres/0001_jobs.sql"))];
 
@@ -195,7 +196,7 @@ impl Db {
                 pg_client(&mut slot, u)?;
                 let db = Db::Postgres {
                     url: u.to_string(),
-                    client: Mutex::new(slot),
+                    client: Box::new(Mutex::new(slot)),
                 };
                 db.migrate()?;
                 Ok(db)

@@ -303,8 +303,7 @@ impl JobLimits {
 /// when the database cannot be opened.
 fn worker(args: WorkerArgs) -> ExitCode {
     init_tracing();
-    if !(args.database.starts_with("postgres://") || args.database.starts_with("postgresql://"))
-    {
+    if !(args.database.starts_with("postgres://") || args.database.starts_with("postgresql://")) {
         eprintln!(
             "error: a worker process needs a database shared with the API processes: \
              --database postgres://…, not {:?} (with SQLite, one `impostor-server` process \

@@ -221,21 +221,14 @@ fn work(st: &AppState, owner: &str) {
 /// Renews the lease of job `id` every third of the lease until `ended`
 /// says the run is over, recording its live stage and progress; asks the
 /// run to stop when a `DELETE` asked for it or the lease was lost.
-fn keep_lease(
-    st: &AppState,
-    owner: &str,
-    id: i64,
-    stop: &Stop,
-    ended: &mpsc::Receiver<()>,
-) {
+fn keep_lease(st: &AppState, owner: &str, id: i64, stop: &Stop, ended: &mpsc::Receiver<()>) {
     let every = st.0.cfg.lease / 3;
     let lease_ms = st.0.cfg.lease.as_millis() as i64;
     while ended.recv_timeout(every) == Err(mpsc::RecvTimeoutError::Timeout) {
-        let (stage, progress) = st
-            .0
-            .live
-            .progress(id)
-            .unwrap_or_else(|| ("loading".into(), 0.0));
+        let (stage, progress) =
+            st.0.live
+                .progress(id)
+                .unwrap_or_else(|| ("loading".into(), 0.0));
         match st.0.store.renew(id, owner, lease_ms, &stage, progress) {
             Ok(r) if !r.held => {
                 tracing::warn!(job = id, worker = owner, "lease lost");

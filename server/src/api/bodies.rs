@@ -167,7 +167,10 @@ pub struct MetricsText(pub String);
 
 impl IntoResponse for MetricsText {
     fn into_response(self) -> Response {
-        with_type("text/plain; version=0.0.4; charset=utf-8", self.0.into_bytes())
+        with_type(
+            "text/plain; version=0.0.4; charset=utf-8",
+            self.0.into_bytes(),
+        )
     }
 }
 

@@ -339,9 +339,7 @@ pub(crate) async fn delete(
             // its worker sees the request at its next lease renewal.
             JobState::Queued | JobState::Running => {
                 st.0.live.cancel(id);
-                st.0.store
-                    .request_cancel(id)
-                    .map_err(ApiError::internal)?;
+                st.0.store.request_cancel(id).map_err(ApiError::internal)?;
                 DeleteOutcome::Cancelling
             }
             JobState::Succeeded | JobState::Failed | JobState::Cancelled => {
@@ -392,10 +390,16 @@ fn metrics_text(f: &store::Figures) -> String {
     use std::fmt::Write;
     let mut out = String::new();
     let by = |s: JobState| f.by_state[JobState::ALL.iter().position(|&x| x == s).unwrap_or(0)];
-    let _ = writeln!(out, "# HELP impostor_queue_depth Jobs waiting for a worker.");
+    let _ = writeln!(
+        out,
+        "# HELP impostor_queue_depth Jobs waiting for a worker."
+    );
     let _ = writeln!(out, "# TYPE impostor_queue_depth gauge");
     let _ = writeln!(out, "impostor_queue_depth {}", by(JobState::Queued));
-    let _ = writeln!(out, "# HELP impostor_jobs_running Jobs a worker is running.");
+    let _ = writeln!(
+        out,
+        "# HELP impostor_jobs_running Jobs a worker is running."
+    );
     let _ = writeln!(out, "# TYPE impostor_jobs_running gauge");
     let _ = writeln!(out, "impostor_jobs_running {}", by(JobState::Running));
     let _ = writeln!(out, "# HELP impostor_jobs Jobs in the database, by state.");

@@ -17,6 +17,8 @@ use std::sync::atomic::{AtomicU32, Ordering};
 
 struct Cluster {
     port: u16,
+    /// Outlives this process on purpose (it stops the cluster after it).
+    _watcher: std::process::Child,
 }
 
 static CLUSTER: OnceLock<Cluster> = OnceLock::new();
@@ -97,7 +99,16 @@ fn start_cluster() -> Cluster {
     let data_s = data.to_string_lossy().to_string();
     let out = as_user(
         &bin.join("initdb"),
-        &["-D", &data_s, "-U", "impostor", "--auth=trust", "-E", "UTF8", "--no-sync"],
+        &[
+            "-D",
+            &data_s,
+            "-U",
+            "impostor",
+            "--auth=trust",
+            "-E",
+            "UTF8",
+            "--no-sync",
+        ],
     )
     .stdout(Stdio::null())
     .output()
@@ -153,8 +164,10 @@ fn start_cluster() -> Cluster {
             .stderr(Stdio::null())
             .spawn()
     };
-    watcher.expect("start the cluster's watcher");
-    Cluster { port }
+    Cluster {
+        port,
+        _watcher: watcher.expect("start the cluster's watcher"),
+    }
 }
 
 /// The URL of a new, empty database of the test process's cluster.

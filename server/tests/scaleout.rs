@@ -1,0 +1,246 @@
+//! Scale-out on PostgreSQL: one API process and several worker processes
+//! (the real binary) sharing a database and a data folder; a worker killed
+//! with SIGKILL mid-job loses its lease and another runs the job again.
+
+use std::io::{Read, Write};
+use std::net::{SocketAddr, TcpStream};
+use std::path::Path;
+use std::process::{Child, Command, Stdio};
+use std::time::{Duration, Instant};
+
+use serde_json::{Value, json};
+
+mod common;
+
+const BIN: &str = env!("CARGO_BIN_EXE_impostor-server");
+
+fn request(addr: SocketAddr, method: &str, path: &str, body: &[u8]) -> Option<(u16, Vec<u8>)> {
+    let mut s = TcpStream::connect_timeout(&addr, Duration::from_secs(2)).ok()?;
+    let head = format!(
+        "{method} {path} HTTP/1.1\r\nHost: t\r\nConnection: close\r\nContent-Type: application/json\r\nContent-Length: {}\r\n\r\n",
+        body.len()
+    );
+    s.write_all(head.as_bytes()).ok()?;
+    s.write_all(body).ok()?;
+    let mut raw = Vec::new();
+    s.read_to_end(&mut raw).ok()?;
+    let split = raw.windows(4).position(|w| w == b"\r\n\r\n")?;
+    let status = std::str::from_utf8(&raw[9..12]).ok()?.parse().ok()?;
+    Some((status, raw[split + 4..].to_vec()))
+}
+
+fn get_json(addr: SocketAddr, path: &str) -> (u16, Value) {
+    let (s, b) = request(addr, "GET", path, b"").expect("request");
+    (s, serde_json::from_slice(&b).unwrap_or(Value::Null))
+}
+
+fn api(dir: &Path, db: &str, addr: SocketAddr) -> Child {
+    let child = Command::new(BIN)
+        .args(["--no-auth", "--role", "api", "--listen", &addr.to_string()])
+        .args(["--max-queue", "100", "--database", db, "--data-dir"])
+        .arg(dir)
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .spawn()
+        .expect("start the API process");
+    let start = Instant::now();
+    while request(addr, "GET", "/healthz", b"").is_none() {
+        assert!(
+            start.elapsed() < Duration::from_secs(20),
+            "API did not start"
+        );
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    child
+}
+
+fn worker(dir: &Path, db: &str) -> Child {
+    Command::new(BIN)
+        .args([
+            "worker",
+            "--lease-seconds",
+            "2",
+            "--database",
+            db,
+            "--data-dir",
+        ])
+        .arg(dir)
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .spawn()
+        .expect("start a worker process")
+}
+
+/// Sends SIGTERM to `child`; its exit status (at most 30 s later).
+fn terminate(child: &mut Child) -> std::process::ExitStatus {
+    let sent = Command::new("kill")
+        .args(["-TERM", &child.id().to_string()])
+        .status()
+        .expect("run kill");
+    assert!(sent.success());
+    let start = Instant::now();
+    loop {
+        if let Some(status) = child.try_wait().unwrap() {
+            return status;
+        }
+        if start.elapsed() > Duration::from_secs(30) {
+            child.kill().unwrap();
+            panic!("a worker did not stop within 30 s of SIGTERM");
+        }
+        std::thread::sleep(Duration::from_millis(50));
+    }
+}
+
+/// One API process, three workers, 30 jobs of three kinds; a worker is
+/// killed with SIGKILL while it runs a job and a fourth is started. Every
+/// job succeeds with the command line's placement bytes, none is recorded
+/// as finished twice, and the killed worker's job was run again (the
+/// control: the kill did hit a running job).
+#[test]
+fn workers_on_postgres_finish_every_job_when_one_is_killed() {
+    let db = common::postgres::database();
+    let dir = std::env::temp_dir().join(format!("impostor-scaleout-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    let addr = std::net::TcpListener::bind("127.0.0.1:0")
+        .unwrap()
+        .local_addr()
+        .unwrap();
+    let mut api = api(&dir, &db, addr);
+    let mut workers: Vec<Child> = (0..3).map(|_| worker(&dir, &db)).collect();
+
+    let glb = common::city(0.1);
+    let scene = optimizer::scene::gltf_load::load_scene_bytes(&glb, "c").unwrap();
+    let summary = serde_json::to_value(scene.summary()).unwrap();
+    let base: Value = serde_json::from_slice(
+        &std::fs::read(concat!(
+            env!("CARGO_MANIFEST_DIR"),
+            "/../fixtures/jobs/city-small.json"
+        ))
+        .unwrap(),
+    )
+    .unwrap();
+    let kinds: Vec<(Vec<u8>, Vec<u8>)> = [None, Some(5.0), Some(7.0)]
+        .iter()
+        .map(|target| {
+            let mut job = base.clone();
+            if let Some(t) = target {
+                job["target_frame_time_ms"] = json!(t);
+            }
+            let body = json!({"scene": summary, "job": job}).to_string();
+            let bytes = serde_json::to_vec(&job).unwrap();
+            (body.into_bytes(), common::cli_placement(&glb, &bytes))
+        })
+        .collect();
+    let mut ids = Vec::new();
+    for i in 0..30 {
+        let (s, b) = request(addr, "POST", "/v1/jobs", &kinds[i % 3].0).unwrap();
+        assert_eq!(s, 202, "{}", String::from_utf8_lossy(&b));
+        let v: Value = serde_json::from_slice(&b).unwrap();
+        ids.push(v["id"].as_str().unwrap().to_string());
+    }
+
+    // Kill the first worker while it runs a job.
+    let mut pg = postgres::Client::connect(&db, postgres::NoTls).unwrap();
+    let victim = workers[0].id();
+    let waited = Instant::now();
+    let killed_job: i64 = loop {
+        let rows = pg
+            .query(
+                "SELECT id FROM jobs WHERE state = 'running' AND progress > 0
+                 AND lease_owner LIKE $1",
+                &[&format!("%:{victim}:%")],
+            )
+            .unwrap();
+        if let Some(r) = rows.first() {
+            break r.get(0);
+        }
+        assert!(
+            waited.elapsed() < Duration::from_secs(60),
+            "the first worker never ran a job"
+        );
+        std::thread::sleep(Duration::from_millis(20));
+    };
+    workers[0].kill().unwrap(); // SIGKILL
+    workers[0].wait().unwrap();
+    workers.push(worker(&dir, &db));
+
+    let start = Instant::now();
+    for id in &ids {
+        loop {
+            let (s, v) = get_json(addr, &format!("/v1/jobs/{id}"));
+            assert_eq!(s, 200, "{v}");
+            match v["state"].as_str() {
+                Some("succeeded") => break,
+                Some("failed" | "cancelled") => panic!("job {id}: {v}"),
+                _ => {}
+            }
+            assert!(
+                start.elapsed() < Duration::from_secs(300),
+                "job {id} unfinished: {v}"
+            );
+            std::thread::sleep(Duration::from_millis(100));
+        }
+    }
+    for (i, id) in ids.iter().enumerate() {
+        let (s, p) = request(addr, "GET", &format!("/v1/jobs/{id}/placement"), b"").unwrap();
+        assert_eq!(s, 200);
+        assert!(
+            p == kinds[i % 3].1,
+            "job {id}: not the command line's bytes"
+        );
+    }
+    // No job is recorded as finished twice; the killed one ran again.
+    let rows = pg
+        .query(
+            "SELECT id, completions, attempts FROM jobs ORDER BY id",
+            &[],
+        )
+        .unwrap();
+    assert_eq!(rows.len(), 30);
+    for r in &rows {
+        let (id, completions, attempts): (i64, i64, i64) = (r.get(0), r.get(1), r.get(2));
+        assert_eq!(completions, 1, "job {id} finished {completions} times");
+        if id == killed_job {
+            assert!(
+                attempts >= 2,
+                "job {id}, killed mid-run, ran {attempts} times"
+            );
+        }
+    }
+    // The metrics see the finished jobs and the live workers.
+    let (s, text) = request(addr, "GET", "/metrics", b"").unwrap();
+    assert_eq!(s, 200);
+    let text = String::from_utf8(text).unwrap();
+    let metric = |name: &str| -> f64 {
+        text.lines()
+            .find_map(|l| l.strip_prefix(name)?.strip_prefix(' ')?.parse().ok())
+            .unwrap_or_else(|| panic!("no {name} in {text}"))
+    };
+    assert_eq!(metric("impostor_queue_depth"), 0.0);
+    assert_eq!(metric("impostor_jobs_running"), 0.0);
+    assert_eq!(metric("impostor_jobs{state=\"succeeded\"}"), 30.0);
+    assert_eq!(metric("impostor_job_duration_seconds_count"), 30.0);
+    assert!(metric("impostor_workers") >= 3.0, "{text}");
+
+    // SIGTERM stops a worker gracefully.
+    for w in workers.iter_mut().skip(1) {
+        let status = terminate(w);
+        assert_eq!(status.code(), Some(0), "{status:?}");
+    }
+    api.kill().unwrap();
+    api.wait().unwrap();
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// A worker needs a shared PostgreSQL database: given SQLite (or nothing
+/// a worker can share), it exits 2 naming the fix.
+#[test]
+fn a_worker_refuses_a_database_it_cannot_share() {
+    let out = Command::new(BIN)
+        .args(["worker", "--database", "sqlite:/tmp/x.sqlite"])
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("postgres://"), "{err}");
+}
