@@ -11,5 +11,6 @@ mod golden;
 mod real_scenes;
 mod report;
 mod schemas;
+mod tiles;
 mod util;
 mod visibility;

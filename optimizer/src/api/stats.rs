@@ -93,6 +93,11 @@ pub struct Stats {
     /// The `exact` method's program (absent for other methods).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub exact: Option<ExactStats>,
+    /// Per tile of a tiled job (`partition`), in order; the counters above
+    /// are then the tiles' sums (impostors and memory: the merged
+    /// placement's, each shared impostor once).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub tiles: Vec<TileStats>,
 }
 
 /// The `exact` method's integer program and how far the greedy is from it.
@@ -153,6 +158,26 @@ pub struct StageTime {
     /// the peak happened. Absent where not measured.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub peak_rss_bytes: Option<u64>,
+}
+
+/// One tile of a tiled run.
+#[derive(Clone, Debug, Default, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct TileStats {
+    /// Its view space's minimum corner.
+    pub min: [f64; 3],
+    /// Its view space's maximum corner.
+    pub max: [f64; 3],
+    /// Its CPVs.
+    pub cpvs: u64,
+    /// Its impostors (some may be shared with other tiles).
+    pub impostors: u64,
+    /// Its impostors' memory, bytes.
+    pub memory_bytes: u64,
+    /// Its stages' summed wall time, seconds.
+    pub seconds: f64,
+    /// The process's peak resident memory when it ended, bytes.
+    pub peak_rss_bytes: u64,
 }
 
 impl StageTime {

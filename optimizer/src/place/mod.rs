@@ -2,6 +2,7 @@
 //! placement. [`Prepared::place`] reads as the paper's algorithm outline.
 
 mod assemble;
+pub mod tiles;
 
 use std::time::Instant;
 
@@ -81,6 +82,9 @@ impl Prepared<'_> {
     pub fn place(&self, opts: &PlaceOptions, ctl: &Control) -> Result<PlaceOutput> {
         let job = self.job();
         job.method().check_places(self.job_name())?;
+        if let Some(p) = &job.partition {
+            return self.place_tiled(p.tiles, opts, ctl);
+        }
         let mut st = Stages::new(ctl, self.seconds());
         st.begin(
             "problem_views",

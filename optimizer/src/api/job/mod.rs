@@ -78,6 +78,20 @@ pub struct Job {
     /// a loop through the view space.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub walkthrough: Option<WalkthroughParams>,
+    /// Split the view space into tiles placed one after another (each a job
+    /// of its own over its part of the view space, on the same grid) and
+    /// merge their placements; absent: one placement of the whole.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub partition: Option<Partition>,
+}
+
+/// How a job's view space is split into tiles.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct Partition {
+    /// Tiles along x and z `[nx, nz]`, each 1–64; tile boundaries are grid
+    /// boundaries (fewer tiles where the grid has fewer cells).
+    pub tiles: [u32; 2],
 }
 
 /// A walkthrough path.
@@ -583,6 +597,7 @@ impl Job {
             iboh: IbohParams::default(),
             al99: Al99Params::default(),
             walkthrough: None,
+            partition: None,
         }
     }
 
@@ -704,6 +719,18 @@ mod tests {
                 "problem_views.cell_size",
             ),
             (r#"{"camera":{}}"#, "view_space"),
+            (
+                r#"{"view_space":{"min":[0,0,0],"max":[1,1,1]},"partition":{"tiles":[0,2]}}"#,
+                "partition.tiles",
+            ),
+            (
+                r#"{"view_space":{"min":[0,0,0],"max":[1,1,1]},"partition":{"tiles":[2,65]}}"#,
+                "partition.tiles",
+            ),
+            (
+                r#"{"view_space":{"min":[0,0,0],"max":[1,1,1]},"partition":{"tiles":[2,2]},"memory":{"budget_bytes":1000}}"#,
+                "memory.budget_bytes",
+            ),
         ];
         for (json, needle) in cases {
             let err = parse(json).unwrap_err().to_string();

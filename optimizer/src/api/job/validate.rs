@@ -287,6 +287,22 @@ impl Job {
                 format!("{} must be a positive number of metres", e.far_m),
             ));
         }
+        if let Some(p) = &self.partition {
+            if p.tiles.iter().any(|&n| !(1..=64).contains(&n)) {
+                return Err(bad(
+                    "partition.tiles",
+                    format!("{:?} must be two tile counts in 1..=64", p.tiles),
+                ));
+            }
+            if self.memory.budget_bytes.is_some() {
+                return Err(bad(
+                    "partition",
+                    "tiles cannot share a memory budget (memory.budget_bytes): give one or \
+                     the other"
+                        .into(),
+                ));
+            }
+        }
         let c = self.dts96.cell_m;
         if !(c.is_finite() && c > 0.0 && c <= 1e7) {
             return Err(bad(
