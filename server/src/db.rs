@@ -138,10 +138,14 @@ fn pg_client<'a>(
 }
 
 /// The migrations of each engine, in order: (version, SQL).
-const SQLITE_MIGRATIONS: &[(i64, &str)] =
-    &[(1, include_str!("../migrations/sqlite/0001_leases.sql"))];
-const POSTGRES_MIGRATIONS: &[(i64, &str)] =
-    &[(1, include_str!("../migrations/postgres/0001_jobs.sql"))];
+const SQLITE_MIGRATIONS: &[(i64, &str)] = &[
+    (1, include_str!("../migrations/sqlite/0001_leases.sql")),
+    (2, include_str!("../migrations/sqlite/0002_tiles.sql")),
+];
+const POSTGRES_MIGRATIONS: &[(i64, &str)] = &[
+    (1, include_str!("../migrations/postgres/0001_jobs.sql")),
+    (2, include_str!("../migrations/postgres/0002_tiles.sql")),
+];
 
 fn sqlite_err(e: rusqlite::Error) -> io::Error {
     io::Error::other(e)

@@ -9,12 +9,13 @@ use axum::http::StatusCode;
 use serde_json::Value;
 
 use optimizer::api::job::{Job, VisibilityMode};
+use optimizer::api::placement::Placement;
 use optimizer::control::{Control, Event};
 use optimizer::evaluate::EvalOptions;
-use optimizer::input::{GeometryUse, Load, SceneInput, Source};
+use optimizer::input::{GeometryUse, Load, Prepared, SceneInput, Source};
 use optimizer::place::PlaceOptions;
 use optimizer::report::render::render_html;
-use optimizer::report::run::{place_and_evaluate, single_run_report};
+use optimizer::report::run::{RunOutput, evaluate_placed, place_and_evaluate, single_run_report};
 
 use crate::api::types::JobSummary;
 use crate::error::ApiError;
@@ -92,6 +93,65 @@ pub(crate) struct RunOptions<'a> {
 /// `report.html`, `evaluation.json` and, when baking, `impostors.glb`.
 /// Returns the JSON text of the job's [`JobSummary`].
 pub(crate) fn run_job(dir: &Path, opts: &RunOptions<'_>) -> optimizer::Result<String> {
+    run_with(dir, opts, |prepared, place, eval, ctl| {
+        place_and_evaluate(prepared, place, eval, true, ctl)
+    })
+}
+
+/// The jobs of the tiles of a job with `"partition"` (each over its part
+/// of the view space, on the same grid), as JSON; empty for any other job.
+pub(crate) fn tile_jobs(job: &[u8]) -> Result<Vec<Vec<u8>>, ApiError> {
+    let job = Job::from_json(job, "job")
+        .map_err(|e| ApiError::new(StatusCode::UNPROCESSABLE_ENTITY, e.to_string()))?;
+    let Some(p) = &job.partition else {
+        return Ok(Vec::new());
+    };
+    optimizer::place::tiles::tile_jobs(&job, p.tiles)
+        .iter()
+        .map(|t| serde_json::to_vec(t).map_err(ApiError::internal))
+        .collect()
+}
+
+/// The merge of a tiled job stored in `dir` whose tiles were run as jobs
+/// of their own in `tiles` (in tile order): their placements merged as
+/// `impostor place` merges them in one process (the same bytes), then
+/// evaluated, reported and baked over the whole job like [`run_job`].
+pub(crate) fn merge_job(
+    dir: &Path,
+    tiles: &[PathBuf],
+    opts: &RunOptions<'_>,
+) -> optimizer::Result<String> {
+    run_with(dir, opts, |prepared, _, eval, ctl| {
+        let start = std::time::Instant::now();
+        let mut parts = Vec::with_capacity(tiles.len());
+        for t in tiles {
+            let path = t.join("placement.json");
+            let bytes = std::fs::read(&path).map_err(|e| optimizer::Error::io(&path, e))?;
+            let p: Placement = serde_json::from_slice(&bytes)
+                .map_err(|e| optimizer::Error::Internal(format!("{}: {e}", path.display())))?;
+            parts.push(p);
+        }
+        let placement = optimizer::place::tiles::merge(prepared.job(), parts.iter())?;
+        let stats = optimizer::api::stats::Stats {
+            cpvs: placement.summary.cpvs,
+            impostors: placement.summary.impostors,
+            memory_bytes: placement.summary.memory_bytes,
+            unsolved_cpvs: placement.summary.unsolved_cpvs,
+            ..Default::default()
+        };
+        let out = optimizer::place::PlaceOutput { placement, stats };
+        let seconds = start.elapsed().as_secs_f64();
+        evaluate_placed(prepared, out, seconds, eval, true, ctl)
+    })
+}
+
+/// Loads the job stored in `dir`, runs `place` (which places, or merges,
+/// and evaluates) and writes the results.
+fn run_with(
+    dir: &Path,
+    opts: &RunOptions<'_>,
+    place: impl FnOnce(&Prepared, &PlaceOptions, &EvalOptions, &Control) -> optimizer::Result<RunOutput>,
+) -> optimizer::Result<String> {
     let io = |p: PathBuf| move |e| optimizer::Error::io(p, e);
     let scene_bytes = std::fs::read(dir.join("scene")).map_err(io(dir.join("scene")))?;
     let job_bytes = std::fs::read(dir.join("job.json")).map_err(io(dir.join("job.json")))?;
@@ -143,12 +203,12 @@ pub(crate) fn run_job(dir: &Path, opts: &RunOptions<'_>) -> optimizer::Result<St
         seed: 1,
         ..EvalOptions::default()
     };
-    let place = PlaceOptions {
+    let placement_opts = PlaceOptions {
         max_memory_bytes: opts.max_memory_bytes,
         max_memory_name: Some("the server's --job-max-memory"),
         ..PlaceOptions::default()
     };
-    let out = place_and_evaluate(&prepared, &place, &eval, true, &ctl)?;
+    let out = place(&prepared, &placement_opts, &eval, &ctl)?;
     ctl.check()?;
     write_atomic(
         &dir.join("placement.json"),

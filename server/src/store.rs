@@ -84,6 +84,8 @@ pub(crate) struct JobRow {
     pub finished_ms: Option<i64>,
     /// The stored progress of a running job (its worker's last renewal).
     pub progress: Option<f64>,
+    /// A tiled job's number of tiles (each a job of its own).
+    pub tiles: Option<i64>,
 }
 
 /// Milliseconds since the Unix epoch.
@@ -147,6 +149,9 @@ pub(crate) const DURATION_BUCKETS: [f64; 8] = [1.0, 5.0, 15.0, 60.0, 300.0, 900.
 
 /// A worker not seen for this long is not counted.
 pub(crate) const WORKER_SEEN_MS: i64 = 60_000;
+
+/// The final states, as SQL text.
+const FINAL: &str = "'succeeded', 'failed', 'cancelled'";
 
 fn int(v: i64) -> Value {
     Value::from(v)
@@ -247,18 +252,10 @@ impl Store {
         staged: &Staged,
         bake: bool,
         tenant: Option<&str>,
+        tiles: &[Vec<u8>],
     ) -> io::Result<(i64, String)> {
         use std::io::Read;
-        // Ids are never reused, not even those of deleted jobs; the update
-        // is atomic, so processes sharing the database never get the same.
-        let id = self
-            .db
-            .query_one(
-                "UPDATE meta SET v = v + 1 WHERE k = 'next_id' RETURNING v - 1",
-                &[],
-            )?
-            .and_then(|r| r.int(0))
-            .ok_or_else(|| io::Error::other("the database has no next_id"))?;
+        let id = self.next_id()?;
         let dir = self.job_dir(id);
         let _ = std::fs::remove_dir_all(&dir);
         std::fs::create_dir_all(&dir)?;
@@ -278,20 +275,74 @@ impl Store {
         }
         let kind = if glb { "glb" } else { "json" };
         let uid = new_uid();
-        self.db.execute(
-            "INSERT INTO jobs (id, uid, state, bake, scene_kind, created_ms, tenant)
-             VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7)",
-            &[
-                int(id),
-                text(&uid),
-                state(JobState::Queued),
-                int(bake as i64),
-                text(kind),
-                int(now_ms()),
-                Value::from(tenant),
-            ],
-        )?;
+        let row = |id: i64, uid: &str, bake: bool, parent: Option<i64>, tiles: Option<i64>| {
+            self.db.execute(
+                "INSERT INTO jobs (id, uid, state, bake, scene_kind, created_ms, tenant,
+                                   parent_id, tiles)
+                 VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7, ?8, ?9)",
+                &[
+                    int(id),
+                    text(uid),
+                    state(JobState::Queued),
+                    int(bake as i64),
+                    text(kind),
+                    int(now_ms()),
+                    Value::from(tenant),
+                    Value::from(parent),
+                    Value::from(tiles),
+                ],
+            )
+        };
+        // A tiled job: the parent's row first (it waits until all its
+        // tiles' rows exist and are final), then one job per tile, its
+        // inputs linked to the parent's (no copy).
+        let n = (!tiles.is_empty()).then_some(tiles.len() as i64);
+        row(id, &uid, bake, None, n)?;
+        for t in tiles {
+            let child = self.next_id()?;
+            let cdir = self.job_dir(child);
+            let _ = std::fs::remove_dir_all(&cdir);
+            std::fs::create_dir_all(&cdir)?;
+            for name in [SCENE, PVS] {
+                let from = dir.join(name);
+                if from.exists() && std::fs::hard_link(&from, cdir.join(name)).is_err() {
+                    std::fs::copy(&from, cdir.join(name))?;
+                }
+            }
+            write_atomic(&cdir.join(JOB), t)?;
+            row(child, &new_uid(), false, Some(id), None)?;
+        }
         Ok((id, uid))
+    }
+
+    /// A new internal id. Ids are never reused, not even those of deleted
+    /// jobs; the update is atomic, so processes sharing the database never
+    /// get the same.
+    fn next_id(&self) -> io::Result<i64> {
+        self.db
+            .query_one(
+                "UPDATE meta SET v = v + 1 WHERE k = 'next_id' RETURNING v - 1",
+                &[],
+            )?
+            .and_then(|r| r.int(0))
+            .ok_or_else(|| io::Error::other("the database has no next_id"))
+    }
+
+    /// The rows of the tiles of job `id`, in tile order.
+    pub fn children(&self, id: i64) -> io::Result<Vec<JobRow>> {
+        let ids: Vec<i64> = self
+            .db
+            .query(
+                "SELECT id FROM jobs WHERE parent_id = ?1 ORDER BY id",
+                &[int(id)],
+            )?
+            .iter()
+            .filter_map(|r| r.int(0))
+            .collect();
+        Ok(ids
+            .into_iter()
+            .filter_map(|c| self.row(c).ok().flatten())
+            .collect())
     }
 
     /// Stages `scene`, `job` and `pvs` (as an upload would) and creates
@@ -312,16 +363,17 @@ impl Store {
         if let Some(p) = pvs {
             write_atomic(&staged.path(PVS), p)?;
         }
-        self.create(&staged, false, tenant)
+        self.create(&staged, false, tenant, &[])
     }
 
-    /// Claims the oldest job that is queued, or running with a lease that
-    /// ran out (its worker died: the job runs again from its inputs), for
-    /// worker `owner` with a lease of `lease_ms`. Returns its id and
-    /// whether it bakes. On PostgreSQL, concurrent claims skip each
+    /// Claims the oldest job that is queued (a tiled job's merge once all
+    /// its tiles are final), or running with a lease that ran out (its
+    /// worker died: the job runs again from its inputs), for worker
+    /// `owner` with a lease of `lease_ms`. Returns its id, whether it bakes
+    /// and whether it is a tiled job's merge. On PostgreSQL, concurrent claims skip each
     /// other's rows (`FOR UPDATE SKIP LOCKED`), so no two workers take the
     /// same job.
-    pub fn claim(&self, owner: &str, lease_ms: i64) -> io::Result<Option<(i64, bool)>> {
+    pub fn claim(&self, owner: &str, lease_ms: i64) -> io::Result<Option<(i64, bool, bool)>> {
         let now = now_ms();
         let lock = match self.backend() {
             Backend::Postgres => "FOR UPDATE SKIP LOCKED",
@@ -331,10 +383,13 @@ impl Store {
             &format!(
                 "UPDATE jobs SET state = ?3, lease_owner = ?1, lease_until_ms = ?2 + ?4,
                      started_ms = ?2, stage = 'loading', progress = 0, attempts = attempts + 1
-                 WHERE id = (SELECT id FROM jobs
-                             WHERE state = ?5 OR (state = ?3 AND lease_until_ms < ?2)
+                 WHERE id = (SELECT id FROM jobs j
+                             WHERE (state = ?5 AND (tiles IS NULL OR tiles =
+                                       (SELECT COUNT(*) FROM jobs c WHERE c.parent_id = j.id
+                                        AND c.state IN ({FINAL}))))
+                                OR (state = ?3 AND lease_until_ms < ?2)
                              ORDER BY id LIMIT 1 {lock})
-                 RETURNING id, bake"
+                 RETURNING id, bake, tiles"
             ),
             &[
                 text(owner),
@@ -344,7 +399,7 @@ impl Store {
                 state(JobState::Queued),
             ],
         )?;
-        Ok(row.and_then(|r| Some((r.int(0)?, r.int(1)? != 0))))
+        Ok(row.and_then(|r| Some((r.int(0)?, r.int(1)? != 0, r.int(2).is_some()))))
     }
 
     /// Renews `owner`'s lease of running job `id` for `lease_ms` more and
@@ -424,6 +479,13 @@ impl Store {
     /// Cancels job `id` if it is still queued (true), in one statement, so a
     /// worker's claim and the cancel never both succeed.
     pub fn cancel_queued(&self, id: i64) -> io::Result<bool> {
+        // A tiled job's tiles first (queued ones end, running ones are
+        // asked to stop), then the job.
+        for c in self.children(id)? {
+            if !self.cancel_queued(c.id)? && c.state == JobState::Running {
+                self.request_cancel(c.id)?;
+            }
+        }
         let n = self.db.execute(
             "UPDATE jobs SET state = ?2, error = ?3, finished_ms = ?4 WHERE id = ?1 AND state = ?5",
             &[
@@ -471,7 +533,7 @@ impl Store {
         Ok(self
             .db
             .query_one(
-                "SELECT COUNT(*) FROM jobs WHERE state = ?1",
+                "SELECT COUNT(*) FROM jobs WHERE state = ?1 AND parent_id IS NULL",
                 &[state(JobState::Queued)],
             )?
             .and_then(|r| r.int(0))
@@ -536,7 +598,7 @@ impl Store {
         let row = self.db.query_one(
             &format!(
                 "SELECT state, stage, error, summary, bake, created_ms, started_ms, finished_ms,
-                        uid, id, progress
+                        uid, id, progress, tiles
                  FROM jobs WHERE {condition}"
             ),
             params,
@@ -554,6 +616,7 @@ impl Store {
                 uid: r.text(8)?,
                 id: r.int(9)?,
                 progress: r.real(10),
+                tiles: r.int(11),
             })
         }))
     }
@@ -563,7 +626,8 @@ impl Store {
         Ok(self
             .db
             .query_one(
-                "SELECT COUNT(*) FROM jobs WHERE tenant = ?1 AND state IN (?2, ?3)",
+                "SELECT COUNT(*) FROM jobs WHERE tenant = ?1 AND state IN (?2, ?3)
+                 AND parent_id IS NULL",
                 &[
                     text(tenant),
                     state(JobState::Queued),
@@ -581,7 +645,7 @@ impl Store {
             .db
             .query(
                 "SELECT id FROM jobs WHERE id > ?1 AND (CAST(?3 AS TEXT) IS NULL OR tenant = ?3)
-                 ORDER BY id LIMIT ?2",
+                 AND parent_id IS NULL ORDER BY id LIMIT ?2",
                 &[int(after), int(limit), Value::from(tenant)],
             )?
             .iter()
@@ -596,7 +660,7 @@ impl Store {
             .db
             .query(
                 "SELECT id FROM jobs WHERE finished_ms IS NOT NULL AND finished_ms < ?1
-                 AND state IN (?2, ?3, ?4) ORDER BY id",
+                 AND state IN (?2, ?3, ?4) AND parent_id IS NULL ORDER BY id",
                 &[
                     int(cutoff_ms),
                     state(JobState::Succeeded),
@@ -609,10 +673,16 @@ impl Store {
             .collect())
     }
 
-    /// Removes job `id`'s row, then its files.
+    /// Removes job `id`'s row and its tiles', then their files.
     pub fn delete(&self, id: i64) -> io::Result<()> {
-        self.db
-            .execute("DELETE FROM jobs WHERE id = ?1", &[int(id)])?;
+        let children: Vec<i64> = self.children(id)?.iter().map(|c| c.id).collect();
+        self.db.execute(
+            "DELETE FROM jobs WHERE id = ?1 OR parent_id = ?1",
+            &[int(id)],
+        )?;
+        for c in children {
+            let _ = std::fs::remove_dir_all(self.job_dir(c));
+        }
         let _ = std::fs::remove_dir_all(self.job_dir(id));
         Ok(())
     }

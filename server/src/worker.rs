@@ -11,7 +11,7 @@ use std::time::Duration;
 
 use crate::AppState;
 use crate::job::{CANCELLED_BY_REQUEST, JobState};
-use crate::pipeline::{RunOptions, run_job};
+use crate::pipeline::{RunOptions, merge_job, run_job};
 
 /// Wakes idle workers of this process when a job is submitted here; they
 /// also look at the database every [`POLL`] for jobs submitted elsewhere
@@ -207,7 +207,7 @@ fn work(st: &AppState, owner: &str) {
             tracing::warn!(worker = owner, "database: {e}");
         }
         match store.claim(owner, lease_ms) {
-            Ok(Some((id, bake))) => run(st, owner, id, bake),
+            Ok(Some((id, bake, merge))) => run(st, owner, id, bake, merge),
             Ok(None) => seen = wakeup.wait(seen),
             Err(e) => {
                 tracing::warn!(worker = owner, "cannot claim a job: {e}");
@@ -249,7 +249,7 @@ fn keep_lease(st: &AppState, owner: &str, id: i64, stop: &Stop, ended: &mpsc::Re
 
 /// Runs job `id`, claimed by `owner`, on the calling (worker) thread and
 /// records its final state while `owner` still holds its lease.
-fn run(st: &AppState, owner: &str, id: i64, bake: bool) {
+fn run(st: &AppState, owner: &str, id: i64, bake: bool, merge: bool) {
     let store = &st.0.store;
     let live = &st.0.live;
     let stop = live.start(id);
@@ -285,8 +285,13 @@ fn run(st: &AppState, owner: &str, id: i64, bake: bool) {
         let stop = &stop;
         let keeper = s.spawn(move || keep_lease(st, owner, id, stop, &lease_watch));
         // A panic in the optimizer fails this job, not the worker.
-        let outcome =
-            std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| run_job(&dir, &opts)));
+        let outcome = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+            if merge {
+                merge_tiles(store, id, &dir, &opts)
+            } else {
+                run_job(&dir, &opts)
+            }
+        }));
         drop(lease_end);
         let _ = keeper.join();
         outcome
@@ -319,6 +324,35 @@ fn run(st: &AppState, owner: &str, id: i64, bake: bool) {
         }
     }
     release_memory();
+}
+
+/// The merge of tiled job `id` (in `dir`) once its tiles are final: fails
+/// naming the first tile that did not succeed.
+fn merge_tiles(
+    store: &crate::store::Store,
+    id: i64,
+    dir: &std::path::Path,
+    opts: &RunOptions<'_>,
+) -> optimizer::Result<String> {
+    let tiles = store
+        .children(id)
+        .map_err(|e| optimizer::Error::io(dir, e))?;
+    for (k, t) in tiles.iter().enumerate() {
+        match t.state {
+            JobState::Succeeded => {}
+            JobState::Cancelled => return Err(optimizer::Error::Cancelled),
+            _ => {
+                return Err(optimizer::Error::bad(
+                    format!("tile {} of {}", k + 1, tiles.len()),
+                    t.error
+                        .clone()
+                        .unwrap_or_else(|| format!("ended {}", t.state)),
+                ));
+            }
+        }
+    }
+    let dirs: Vec<_> = tiles.iter().map(|t| store.job_dir(t.id)).collect();
+    merge_job(dir, &dirs, opts)
 }
 
 /// Stops the workers of `st`: no more claims; running jobs are stopped and

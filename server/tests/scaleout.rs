@@ -232,6 +232,83 @@ fn workers_on_postgres_finish_every_job_when_one_is_killed() {
     let _ = std::fs::remove_dir_all(&dir);
 }
 
+/// A tiled job (2 × 2) runs as one job per tile, claimed by any worker,
+/// then a merge once every tile is final: its placement is the command
+/// line's for the same tiled job, byte for byte, and keeps the guarantee;
+/// the listing shows the job, not its tiles.
+#[test]
+fn a_tiled_job_runs_its_tiles_on_the_workers_and_merges_them() {
+    let db = common::postgres::database();
+    let dir = std::env::temp_dir().join(format!("impostor-tiled-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    let addr = std::net::TcpListener::bind("127.0.0.1:0")
+        .unwrap()
+        .local_addr()
+        .unwrap();
+    let mut api = api(&dir, &db, addr);
+    let mut workers: Vec<Child> = (0..2).map(|_| worker(&dir, &db)).collect();
+    let glb = common::city(0.1);
+    let scene = optimizer::scene::gltf_load::load_scene_bytes(&glb, "c").unwrap();
+    let mut job: Value = serde_json::from_slice(
+        &std::fs::read(concat!(
+            env!("CARGO_MANIFEST_DIR"),
+            "/../fixtures/jobs/city-small.json"
+        ))
+        .unwrap(),
+    )
+    .unwrap();
+    job["partition"] = json!({"tiles": [2, 2]});
+    let expected = common::cli_placement(&glb, &serde_json::to_vec(&job).unwrap());
+    let body = json!({"scene": serde_json::to_value(scene.summary()).unwrap(), "job": job});
+    let (s, b) = request(addr, "POST", "/v1/jobs", body.to_string().as_bytes()).unwrap();
+    assert_eq!(s, 202, "{}", String::from_utf8_lossy(&b));
+    let id = serde_json::from_slice::<Value>(&b).unwrap()["id"]
+        .as_str()
+        .unwrap()
+        .to_string();
+    let start = Instant::now();
+    let status = loop {
+        let (s, v) = get_json(addr, &format!("/v1/jobs/{id}"));
+        assert_eq!(s, 200, "{v}");
+        match v["state"].as_str() {
+            Some("succeeded") => break v,
+            Some("failed" | "cancelled") => panic!("{v}"),
+            _ => {}
+        }
+        assert!(start.elapsed() < Duration::from_secs(120), "{v}");
+        std::thread::sleep(Duration::from_millis(100));
+    };
+    let (s, p) = request(addr, "GET", &format!("/v1/jobs/{id}/placement"), b"").unwrap();
+    assert_eq!(s, 200);
+    assert!(
+        p == expected,
+        "the merged placement is not the command line's"
+    );
+    assert_eq!(status["summary"]["violations_in_solved"], 0, "{status}");
+    assert_eq!(status["summary"]["violations_in_cpv_views"], 0, "{status}");
+    let (_, list) = get_json(addr, "/v1/jobs");
+    assert_eq!(list["jobs"].as_array().unwrap().len(), 1, "{list}");
+    let mut pg = postgres::Client::connect(&db, postgres::NoTls).unwrap();
+    let rows = pg
+        .query(
+            "SELECT c.state, c.completions FROM jobs c JOIN jobs p ON c.parent_id = p.id
+             WHERE p.uid = $1",
+            &[&id],
+        )
+        .unwrap();
+    assert_eq!(rows.len(), 4);
+    for r in &rows {
+        assert_eq!(r.get::<_, String>(0), "succeeded");
+        assert_eq!(r.get::<_, i64>(1), 1);
+    }
+    for w in &mut workers {
+        assert_eq!(terminate(w).code(), Some(0));
+    }
+    api.kill().unwrap();
+    api.wait().unwrap();
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
 /// A worker needs a shared PostgreSQL database: given SQLite (or nothing
 /// a worker can share), it exits 2 naming the fix.
 #[test]

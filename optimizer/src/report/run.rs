@@ -218,10 +218,23 @@ pub fn place_and_evaluate(
     walk: bool,
     ctl: &Control,
 ) -> Result<RunOutput> {
-    let job = prepared.job();
     let start = Instant::now();
     let out = prepared.place(opts, ctl)?;
     let seconds = start.elapsed().as_secs_f64();
+    evaluate_placed(prepared, out, seconds, eval, walk, ctl)
+}
+
+/// [`place_and_evaluate`] for a placement made already (`out`, in
+/// `seconds`): e.g. the merge of a tiled job's tiles placed elsewhere.
+pub fn evaluate_placed(
+    prepared: &Prepared,
+    out: PlaceOutput,
+    seconds: f64,
+    eval: &EvalOptions,
+    walk: bool,
+    ctl: &Control,
+) -> Result<RunOutput> {
+    let job = prepared.job();
     ctl.check()?;
     let p = &out.placement;
     ctl.progress("evaluate", 0.98, "evaluating the placement");

@@ -17,7 +17,7 @@ use super::extract::{Caller, JobId, Submission};
 use super::types::{Accepted, DeleteAnswer, DeleteOutcome, Health, JobEvent, JobList, JobStatus};
 use crate::error::ApiError;
 use crate::job::JobState;
-use crate::pipeline::check_submission;
+use crate::pipeline::{check_submission, tile_jobs};
 use crate::store::{self, JobRow};
 use crate::{Access, AppState, OPTIMIZER_VERSION};
 
@@ -58,9 +58,12 @@ fn accept(st: &AppState, access: &Access, sub: Submission) -> Result<String, Api
     st.check_queue()?;
     st.check_quota(access)?;
     let tenant = access.tenant();
+    let tiles = std::fs::read(sub.staged.path(store::JOB))
+        .map_err(ApiError::internal)
+        .and_then(|job| tile_jobs(&job))?;
     let (id, uid) =
         st.0.store
-            .create(&sub.staged, sub.bake, tenant)
+            .create(&sub.staged, sub.bake, tenant, &tiles)
             .map_err(ApiError::internal)?;
     tracing::info!(job = id, uid, tenant, "accepted");
     st.0.wakeup.notify();
@@ -95,12 +98,19 @@ async fn find(st: &AppState, access: &Access, uid: &str) -> Result<JobRow, ApiEr
 }
 
 /// The status of the job of `row`, with the live stage and progress while
-/// it runs.
+/// it runs (blocking: a tiled job's tiles are read from the database).
 fn job_status(st: &AppState, row: JobRow) -> JobStatus {
     let (stage, progress) = match st.0.live.progress(row.id) {
         Some((stage, progress)) => (Some(stage), progress),
         // Run by a worker of another process: its last renewal.
         None if row.state == JobState::Running => (row.stage, row.progress.unwrap_or(0.0)),
+        // A tiled job whose tiles run: the share of them finished.
+        None if row.state == JobState::Queued && row.tiles.is_some() => {
+            let tiles = st.0.store.children(row.id).unwrap_or_default();
+            let done = tiles.iter().filter(|t| t.state.is_final()).count();
+            let n = row.tiles.unwrap_or(1).max(1) as f64;
+            (Some("tiles".into()), 0.95 * done as f64 / n)
+        }
         None => (
             row.stage,
             if row.state == JobState::Succeeded {
@@ -131,7 +141,8 @@ pub(crate) async fn status(
     JobId(uid): JobId,
 ) -> Result<Json<JobStatus>, ApiError> {
     let row = find(&st, &access, &uid).await?;
-    Ok(Json(job_status(&st, row)))
+    // A tiled job's status reads its tiles' rows: on the blocking pool.
+    blocking(&st, move |st| Ok(Json(job_status(st, row)))).await
 }
 
 /// The query of `GET /v1/jobs`.

@@ -1,0 +1,6 @@
+-- Tiled jobs: a job with "partition" is a parent row with `tiles` set and
+-- one child row per tile (`parent_id`); workers run the children, then
+-- the parent (the merge) once every child is final.
+ALTER TABLE jobs ADD COLUMN parent_id BIGINT;
+ALTER TABLE jobs ADD COLUMN tiles BIGINT;
+CREATE INDEX IF NOT EXISTS jobs_parent ON jobs (parent_id);
