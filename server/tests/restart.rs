@@ -2,8 +2,7 @@
 //! SIGTERM, mid-job and restarted on the same data directory finishes every
 //! accepted job.
 
-use std::io::{Read, Write};
-use std::net::{SocketAddr, TcpStream};
+use std::net::SocketAddr;
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
@@ -11,25 +10,7 @@ use serde_json::{Value, json};
 
 mod common;
 
-fn request(addr: SocketAddr, method: &str, path: &str, body: &[u8]) -> Option<(u16, Vec<u8>)> {
-    let mut s = TcpStream::connect_timeout(&addr, Duration::from_secs(2)).ok()?;
-    let ctype = if body.is_empty() {
-        ""
-    } else {
-        "Content-Type: application/json\r\n"
-    };
-    let head = format!(
-        "{method} {path} HTTP/1.1\r\nHost: t\r\nConnection: close\r\n{ctype}Content-Length: {}\r\n\r\n",
-        body.len()
-    );
-    s.write_all(head.as_bytes()).ok()?;
-    s.write_all(body).ok()?;
-    let mut raw = Vec::new();
-    s.read_to_end(&mut raw).ok()?;
-    let split = raw.windows(4).position(|w| w == b"\r\n\r\n")?;
-    let status = std::str::from_utf8(&raw[9..12]).ok()?.parse().ok()?;
-    Some((status, raw[split + 4..].to_vec()))
-}
+use common::process::request;
 
 fn spawn(dir: &std::path::Path, addr: SocketAddr) -> Child {
     let child = Command::new(env!("CARGO_BIN_EXE_impostor-server"))
@@ -78,25 +59,9 @@ fn sigterm_mid_job_and_restart_finishes_every_job() {
     });
 }
 
-/// Sends SIGTERM to `child` and waits (at most 20 s) for it to exit.
 #[cfg(unix)]
 fn terminate(child: &mut Child) -> std::process::ExitStatus {
-    let sent = Command::new("kill")
-        .args(["-TERM", &child.id().to_string()])
-        .status()
-        .expect("run kill");
-    assert!(sent.success());
-    let start = Instant::now();
-    loop {
-        if let Some(status) = child.try_wait().unwrap() {
-            return status;
-        }
-        if start.elapsed() > Duration::from_secs(20) {
-            child.kill().unwrap();
-            panic!("the server did not stop within 20 s of SIGTERM");
-        }
-        std::thread::sleep(Duration::from_millis(50));
-    }
+    common::process::terminate(child, Duration::from_secs(20))
 }
 
 /// Submits three jobs, stops the server with `stop` while the first is

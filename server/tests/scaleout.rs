@@ -2,9 +2,8 @@
 //! (the real binary) sharing a database and a data folder; a worker killed
 //! with SIGKILL mid-job loses its lease and another runs the job again.
 
-use std::io::{Read, Write};
-use std::net::{SocketAddr, TcpStream};
-use std::path::Path;
+use std::net::SocketAddr;
+use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
@@ -12,26 +11,29 @@ use serde_json::{Value, json};
 
 mod common;
 
-const BIN: &str = env!("CARGO_BIN_EXE_impostor-server");
+use common::process::request;
 
-fn request(addr: SocketAddr, method: &str, path: &str, body: &[u8]) -> Option<(u16, Vec<u8>)> {
-    let mut s = TcpStream::connect_timeout(&addr, Duration::from_secs(2)).ok()?;
-    let head = format!(
-        "{method} {path} HTTP/1.1\r\nHost: t\r\nConnection: close\r\nContent-Type: application/json\r\nContent-Length: {}\r\n\r\n",
-        body.len()
-    );
-    s.write_all(head.as_bytes()).ok()?;
-    s.write_all(body).ok()?;
-    let mut raw = Vec::new();
-    s.read_to_end(&mut raw).ok()?;
-    let split = raw.windows(4).position(|w| w == b"\r\n\r\n")?;
-    let status = std::str::from_utf8(&raw[9..12]).ok()?.parse().ok()?;
-    Some((status, raw[split + 4..].to_vec()))
-}
+const BIN: &str = env!("CARGO_BIN_EXE_impostor-server");
 
 fn get_json(addr: SocketAddr, path: &str) -> (u16, Value) {
     let (s, b) = request(addr, "GET", path, b"").expect("request");
     (s, serde_json::from_slice(&b).unwrap_or(Value::Null))
+}
+
+/// The status of job `id` once it has succeeded; fails when it ends
+/// otherwise or is still unfinished at `deadline`.
+fn succeeded(addr: SocketAddr, id: &str, deadline: Instant) -> Value {
+    loop {
+        let (s, v) = get_json(addr, &format!("/v1/jobs/{id}"));
+        assert_eq!(s, 200, "{v}");
+        match v["state"].as_str() {
+            Some("succeeded") => return v,
+            Some("failed" | "cancelled") => panic!("job {id}: {v}"),
+            _ => {}
+        }
+        assert!(Instant::now() < deadline, "job {id} unfinished: {v}");
+        std::thread::sleep(Duration::from_millis(100));
+    }
 }
 
 fn api(dir: &Path, db: &str, addr: SocketAddr) -> Child {
@@ -71,24 +73,23 @@ fn worker(dir: &Path, db: &str) -> Child {
         .expect("start a worker process")
 }
 
-/// Sends SIGTERM to `child`; its exit status (at most 30 s later).
+/// A database of the tests' PostgreSQL, an empty data folder, an API
+/// process on a free loopback port and `workers` worker processes.
+fn deploy(name: &str, workers: usize) -> (String, PathBuf, SocketAddr, Child, Vec<Child>) {
+    let db = common::postgres::database();
+    let dir = std::env::temp_dir().join(format!("impostor-{name}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    let addr = std::net::TcpListener::bind("127.0.0.1:0")
+        .unwrap()
+        .local_addr()
+        .unwrap();
+    let api = api(&dir, &db, addr);
+    let workers = (0..workers).map(|_| worker(&dir, &db)).collect();
+    (db, dir, addr, api, workers)
+}
+
 fn terminate(child: &mut Child) -> std::process::ExitStatus {
-    let sent = Command::new("kill")
-        .args(["-TERM", &child.id().to_string()])
-        .status()
-        .expect("run kill");
-    assert!(sent.success());
-    let start = Instant::now();
-    loop {
-        if let Some(status) = child.try_wait().unwrap() {
-            return status;
-        }
-        if start.elapsed() > Duration::from_secs(30) {
-            child.kill().unwrap();
-            panic!("a worker did not stop within 30 s of SIGTERM");
-        }
-        std::thread::sleep(Duration::from_millis(50));
-    }
+    common::process::terminate(child, Duration::from_secs(30))
 }
 
 /// One API process, three workers, 30 jobs of three kinds; a worker is
@@ -98,15 +99,7 @@ fn terminate(child: &mut Child) -> std::process::ExitStatus {
 /// control: the kill did hit a running job).
 #[test]
 fn workers_on_postgres_finish_every_job_when_one_is_killed() {
-    let db = common::postgres::database();
-    let dir = std::env::temp_dir().join(format!("impostor-scaleout-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    let addr = std::net::TcpListener::bind("127.0.0.1:0")
-        .unwrap()
-        .local_addr()
-        .unwrap();
-    let mut api = api(&dir, &db, addr);
-    let mut workers: Vec<Child> = (0..3).map(|_| worker(&dir, &db)).collect();
+    let (db, dir, addr, mut api, mut workers) = deploy("scaleout", 3);
 
     let glb = common::city(0.1);
     let scene = optimizer::scene::gltf_load::load_scene_bytes(&glb, "c").unwrap();
@@ -164,22 +157,9 @@ fn workers_on_postgres_finish_every_job_when_one_is_killed() {
     workers[0].wait().unwrap();
     workers.push(worker(&dir, &db));
 
-    let start = Instant::now();
+    let deadline = Instant::now() + Duration::from_secs(300);
     for id in &ids {
-        loop {
-            let (s, v) = get_json(addr, &format!("/v1/jobs/{id}"));
-            assert_eq!(s, 200, "{v}");
-            match v["state"].as_str() {
-                Some("succeeded") => break,
-                Some("failed" | "cancelled") => panic!("job {id}: {v}"),
-                _ => {}
-            }
-            assert!(
-                start.elapsed() < Duration::from_secs(300),
-                "job {id} unfinished: {v}"
-            );
-            std::thread::sleep(Duration::from_millis(100));
-        }
+        succeeded(addr, id, deadline);
     }
     for (i, id) in ids.iter().enumerate() {
         let (s, p) = request(addr, "GET", &format!("/v1/jobs/{id}/placement"), b"").unwrap();
@@ -238,15 +218,7 @@ fn workers_on_postgres_finish_every_job_when_one_is_killed() {
 /// the listing shows the job, not its tiles.
 #[test]
 fn a_tiled_job_runs_its_tiles_on_the_workers_and_merges_them() {
-    let db = common::postgres::database();
-    let dir = std::env::temp_dir().join(format!("impostor-tiled-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    let addr = std::net::TcpListener::bind("127.0.0.1:0")
-        .unwrap()
-        .local_addr()
-        .unwrap();
-    let mut api = api(&dir, &db, addr);
-    let mut workers: Vec<Child> = (0..2).map(|_| worker(&dir, &db)).collect();
+    let (db, dir, addr, mut api, mut workers) = deploy("tiled", 2);
     let glb = common::city(0.1);
     let scene = optimizer::scene::gltf_load::load_scene_bytes(&glb, "c").unwrap();
     let mut job: Value = serde_json::from_slice(
@@ -266,18 +238,7 @@ fn a_tiled_job_runs_its_tiles_on_the_workers_and_merges_them() {
         .as_str()
         .unwrap()
         .to_string();
-    let start = Instant::now();
-    let status = loop {
-        let (s, v) = get_json(addr, &format!("/v1/jobs/{id}"));
-        assert_eq!(s, 200, "{v}");
-        match v["state"].as_str() {
-            Some("succeeded") => break v,
-            Some("failed" | "cancelled") => panic!("{v}"),
-            _ => {}
-        }
-        assert!(start.elapsed() < Duration::from_secs(120), "{v}");
-        std::thread::sleep(Duration::from_millis(100));
-    };
+    let status = succeeded(addr, &id, Instant::now() + Duration::from_secs(120));
     let (s, p) = request(addr, "GET", &format!("/v1/jobs/{id}/placement"), b"").unwrap();
     assert_eq!(s, 200);
     assert!(

@@ -4,6 +4,8 @@
 pub mod client;
 #[allow(dead_code)]
 pub mod postgres;
+#[allow(dead_code)] // only the tests that run the binary
+pub mod process;
 
 /// The placement the command line writes for `scene` (GLB or summary bytes)
 /// and `job` (JSON bytes): what the service must store byte for byte.
