@@ -50,6 +50,9 @@ struct WorkerArgs {
     /// Jobs this process runs at once.
     #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u64).range(1..=256))]
     workers: u64,
+    /// Threads its jobs use (default: one per core).
+    #[arg(long, value_parser = clap::value_parser!(u64).range(1..=1024))]
+    threads: Option<u64>,
     #[command(flatten)]
     limits: JobLimits,
 }
@@ -311,6 +314,14 @@ fn worker(args: WorkerArgs) -> ExitCode {
             args.database
         );
         return ExitCode::from(2);
+    }
+    if let Some(n) = args.threads
+        && let Err(e) = rayon::ThreadPoolBuilder::new()
+            .num_threads(n as usize)
+            .build_global()
+    {
+        eprintln!("error: cannot start {n} threads: {e}");
+        return ExitCode::FAILURE;
     }
     let mut cfg = Config::new(args.data_dir);
     cfg.workers = args.workers as usize;

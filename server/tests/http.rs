@@ -245,6 +245,43 @@ async fn summary_and_glb_jobs_succeed_with_the_cli_bytes() {
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_tiled_job_merges_its_tiles_with_the_cli_bytes() {
+    let dir = temp_dir("tiled");
+    let mut cfg = Config::new(&dir);
+    cfg.eval_views = 500;
+    cfg.workers = 2;
+    let addr = start(cfg).await;
+    let glb = city(0.1);
+    let scene = optimizer::scene::gltf_load::load_scene_bytes(&glb, "city").unwrap();
+    let mut job: Value = serde_json::from_slice(&job_json()).unwrap();
+    job["partition"] = json!({"tiles": [2, 1]});
+    let expected = common::cli_placement(&glb, &serde_json::to_vec(&job).unwrap());
+    let body = json!({"scene": serde_json::to_value(scene.summary()).unwrap(), "job": job});
+    let (s, b) = submit_json(addr, &body).await;
+    assert_eq!(s, 202, "{}", String::from_utf8_lossy(&b));
+    let id = serde_json::from_slice::<Value>(&b).unwrap()["id"]
+        .as_str()
+        .unwrap()
+        .to_string();
+    let v = wait_final(addr, &id, Duration::from_secs(120)).await;
+    assert_eq!(v["state"], "succeeded", "{v}");
+    let (s, p) = request(addr, "GET", &format!("/v1/jobs/{id}/placement"), None, b"").await;
+    assert_eq!(s, 200);
+    assert!(
+        p == expected,
+        "the merged placement is not the command line's"
+    );
+    // The listing shows the job, not its tiles; deleting it removes the
+    // tiles' folders too.
+    let (_, list) = get_json(addr, "/v1/jobs").await;
+    assert_eq!(list["jobs"].as_array().unwrap().len(), 1, "{list}");
+    assert_eq!(std::fs::read_dir(dir.join("jobs")).unwrap().count(), 3);
+    let (s, _) = request(addr, "DELETE", &format!("/v1/jobs/{id}"), None, b"").await;
+    assert_eq!(s, 200);
+    assert_eq!(std::fs::read_dir(dir.join("jobs")).unwrap().count(), 0);
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn bad_requests_name_the_problem() {
     let mut cfg = Config::new(temp_dir("bad"));
     cfg.max_upload_mb = 1;
