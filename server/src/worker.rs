@@ -25,6 +25,10 @@ pub(crate) struct Wakeup {
 /// How often an idle worker looks for a job.
 pub(crate) const POLL: Duration = Duration::from_millis(500);
 
+/// How often an idle worker records that it is alive (`/metrics` counts
+/// the workers seen in the last minute).
+const SEEN_EVERY: Duration = Duration::from_secs(10);
+
 impl Wakeup {
     /// A job was submitted.
     pub fn notify(&self) {
@@ -202,9 +206,14 @@ fn work(st: &AppState, owner: &str) {
     let wakeup = &st.0.wakeup;
     let lease_ms = st.0.cfg.lease.as_millis() as i64;
     let mut seen = wakeup.count();
+    // An idle worker says it is alive every SEEN_EVERY, not at every poll.
+    let mut said: Option<std::time::Instant> = None;
     while !st.0.stopping.load(Ordering::SeqCst) {
-        if let Err(e) = store.worker_seen(owner) {
-            tracing::warn!(worker = owner, "database: {e}");
+        if said.is_none_or(|t| t.elapsed() >= SEEN_EVERY) {
+            match store.worker_seen(owner) {
+                Ok(()) => said = Some(std::time::Instant::now()),
+                Err(e) => tracing::warn!(worker = owner, "database: {e}"),
+            }
         }
         match store.claim(owner, lease_ms) {
             Ok(Some((id, bake, merge))) => run(st, owner, id, bake, merge),
