@@ -330,19 +330,7 @@ impl Store {
 
     /// The rows of the tiles of job `id`, in tile order.
     pub fn children(&self, id: i64) -> io::Result<Vec<JobRow>> {
-        let ids: Vec<i64> = self
-            .db
-            .query(
-                "SELECT id FROM jobs WHERE parent_id = ?1 ORDER BY id",
-                &[int(id)],
-            )?
-            .iter()
-            .filter_map(|r| r.int(0))
-            .collect();
-        Ok(ids
-            .into_iter()
-            .filter_map(|c| self.row(c).ok().flatten())
-            .collect())
+        self.rows_where("parent_id = ?1 ORDER BY id", &[int(id)])
     }
 
     /// Stages `scene`, `job` and `pvs` (as an upload would) and creates
@@ -595,7 +583,12 @@ impl Store {
     }
 
     fn row_where(&self, condition: &str, params: &[Value]) -> io::Result<Option<JobRow>> {
-        let row = self.db.query_one(
+        Ok(self.rows_where(condition, params)?.into_iter().next())
+    }
+
+    /// The rows `condition` selects, in one query (unreadable ones left out).
+    fn rows_where(&self, condition: &str, params: &[Value]) -> io::Result<Vec<JobRow>> {
+        let rows = self.db.query(
             &format!(
                 "SELECT state, stage, error, summary, bake, created_ms, started_ms, finished_ms,
                         uid, id, progress, tiles
@@ -603,22 +596,25 @@ impl Store {
             ),
             params,
         )?;
-        Ok(row.and_then(|r| {
-            Some(JobRow {
-                state: r.text(0)?.parse().ok()?,
-                stage: r.text(1),
-                error: r.text(2),
-                summary: r.text(3),
-                bake: r.int(4)? != 0,
-                created_ms: r.int(5)?,
-                started_ms: r.int(6),
-                finished_ms: r.int(7),
-                uid: r.text(8)?,
-                id: r.int(9)?,
-                progress: r.real(10),
-                tiles: r.int(11),
+        Ok(rows
+            .iter()
+            .filter_map(|r| {
+                Some(JobRow {
+                    state: r.text(0)?.parse().ok()?,
+                    stage: r.text(1),
+                    error: r.text(2),
+                    summary: r.text(3),
+                    bake: r.int(4)? != 0,
+                    created_ms: r.int(5)?,
+                    started_ms: r.int(6),
+                    finished_ms: r.int(7),
+                    uid: r.text(8)?,
+                    id: r.int(9)?,
+                    progress: r.real(10),
+                    tiles: r.int(11),
+                })
             })
-        }))
+            .collect())
     }
 
     /// The jobs of `tenant` queued or running.

@@ -270,6 +270,83 @@ fn a_tiled_job_runs_its_tiles_on_the_workers_and_merges_them() {
     let _ = std::fs::remove_dir_all(&dir);
 }
 
+/// A worker that stalls past its lease (SIGSTOP) while its job runs loses
+/// the job to another worker; resumed (SIGCONT) while that one runs it, it
+/// finds the lease gone and records nothing: the job is finished once.
+#[test]
+fn a_stalled_worker_loses_its_job_and_records_nothing() {
+    let (db, dir, addr, mut api, mut workers) = deploy("stalled", 1);
+    let glb = common::city(0.1);
+    let scene = optimizer::scene::gltf_load::load_scene_bytes(&glb, "c").unwrap();
+    let job: Value = serde_json::from_slice(
+        &std::fs::read(concat!(
+            env!("CARGO_MANIFEST_DIR"),
+            "/../fixtures/jobs/city-small.json"
+        ))
+        .unwrap(),
+    )
+    .unwrap();
+    let body = json!({"scene": serde_json::to_value(scene.summary()).unwrap(), "job": job});
+    let (s, b) = request(addr, "POST", "/v1/jobs", body.to_string().as_bytes()).unwrap();
+    assert_eq!(s, 202, "{}", String::from_utf8_lossy(&b));
+    let id = serde_json::from_slice::<Value>(&b).unwrap()["id"]
+        .as_str()
+        .unwrap()
+        .to_string();
+    let mut pg = postgres::Client::connect(&db, postgres::NoTls).unwrap();
+    let waited = Instant::now();
+    while pg
+        .query(
+            "SELECT 1 FROM jobs WHERE state = 'running' AND progress > 0",
+            &[],
+        )
+        .unwrap()
+        .is_empty()
+    {
+        assert!(waited.elapsed() < Duration::from_secs(60), "never running");
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    let signal = |sig: &str, pid: u32| {
+        let ok = Command::new("kill")
+            .args([sig, &pid.to_string()])
+            .status()
+            .is_ok_and(|s| s.success());
+        assert!(ok, "kill {sig}");
+    };
+    let stalled = workers[0].id();
+    signal("-STOP", stalled);
+    workers.push(worker(&dir, &db));
+    // Resumed while the second worker runs the job: its next renewal finds
+    // the lease taken (without the owner checks both runs would finish).
+    while pg
+        .query("SELECT 1 FROM jobs WHERE attempts = 2", &[])
+        .unwrap()
+        .is_empty()
+    {
+        assert!(
+            waited.elapsed() < Duration::from_secs(60),
+            "never claimed again"
+        );
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    signal("-CONT", stalled);
+    succeeded(addr, &id, Instant::now() + Duration::from_secs(120));
+    std::thread::sleep(Duration::from_secs(8));
+    let r = pg
+        .query_one("SELECT completions, attempts, state FROM jobs", &[])
+        .unwrap();
+    let (completions, attempts, state): (i64, i64, String) = (r.get(0), r.get(1), r.get(2));
+    assert_eq!(attempts, 2, "the second worker ran it again");
+    assert_eq!(completions, 1, "recorded as finished {completions} times");
+    assert_eq!(state, "succeeded");
+    for w in &mut workers {
+        assert_eq!(terminate(w).code(), Some(0));
+    }
+    api.kill().unwrap();
+    api.wait().unwrap();
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
 /// A worker needs a shared PostgreSQL database: given SQLite (or nothing
 /// a worker can share), it exits 2 naming the fix.
 #[test]

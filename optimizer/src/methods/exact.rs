@@ -787,6 +787,21 @@ mod tests {
             .min()
     }
 
+    /// A limit per CPV: 0 for those above the target (every use listed),
+    /// none for the others.
+    fn open_above_target(ctx: &Context, pv: &ProblemViews) -> Vec<f64> {
+        pv.cpvs
+            .iter()
+            .map(|c| {
+                if c.time > ctx.t_max {
+                    0.0
+                } else {
+                    f64::INFINITY
+                }
+            })
+            .collect()
+    }
+
     /// On tiny instances (a few candidates drawn from the small city's,
     /// with clusters nested, each CPV asked for half or nine tenths of what
     /// they can save there at best), the
@@ -810,17 +825,7 @@ mod tests {
             let ctx = Context::new(&scene, &h, None, &job, Control::default());
             let pv = views::approximate(&ctx, &job, &Counters::new());
             let cands = crate::candidates::generate(&ctx, &job, &pv);
-            let open: Vec<f64> = pv
-                .cpvs
-                .iter()
-                .map(|c| {
-                    if c.time > ctx.t_max {
-                        0.0
-                    } else {
-                        f64::INFINITY
-                    }
-                })
-                .collect();
+            let open = open_above_target(&ctx, &pv);
             let full = Instance::build(&ctx, &pv, &cands, open.clone(), |_| true);
             let mut rng = Rng::new(11);
             for round in 0..4 {
@@ -949,17 +954,7 @@ mod tests {
         let cands = crate::candidates::generate(&ctx, &job, &pv);
         // Every CPV above the target open to every use (a limit of 0 lists
         // them all), to find the chains; then one CPV limited at a time.
-        let open: Vec<f64> = pv
-            .cpvs
-            .iter()
-            .map(|c| {
-                if c.time > ctx.t_max {
-                    0.0
-                } else {
-                    f64::INFINITY
-                }
-            })
-            .collect();
+        let open = open_above_target(&ctx, &pv);
         let free = vec![f64::INFINITY; pv.cpvs.len()];
         let all = Instance::build(&ctx, &pv, &cands, open, |_| true);
         let saved = |s: Cost| ctx.model.time_saved(s).unwrap();
