@@ -1,15 +1,24 @@
 #!/bin/sh
-# Installs what the tests start for real and the machine may lack, from
-# Debian's packages: PostgreSQL's server programs (initdb, pg_ctl), which the
-# service's tests run a temporary cluster with.
+# Installs what the tests start for real and the machine may lack:
+# - PostgreSQL's server programs (initdb, pg_ctl), from Debian's packages,
+#   which the service's tests run a temporary cluster with;
+# - an S3-compatible server (moto's, from PyPI) in a virtual environment of
+#   the project's (target/test-venv), which the artifact store's S3 test
+#   runs on a loopback port.
 set -eu
-if ls /usr/lib/postgresql/*/bin/initdb >/dev/null 2>&1; then
-    exit 0
+cd "$(dirname "$0")/.."
+if ! ls /usr/lib/postgresql/*/bin/initdb >/dev/null 2>&1; then
+    SUDO=""
+    if [ "$(id -u)" != 0 ]; then
+        SUDO=sudo
+    fi
+    echo "install-test-deps: installing Debian's postgresql package" >&2
+    $SUDO apt-get update -qq
+    DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq --no-install-recommends postgresql >/dev/null
 fi
-SUDO=""
-if [ "$(id -u)" != 0 ]; then
-    SUDO=sudo
+VENV=target/test-venv
+if [ ! -x "$VENV/bin/moto_server" ]; then
+    echo "install-test-deps: installing moto's S3 server in $VENV" >&2
+    python3 -m venv "$VENV"
+    "$VENV/bin/pip" install -q --disable-pip-version-check 'moto[server]==5.2.1'
 fi
-echo "install-test-deps: installing Debian's postgresql package" >&2
-$SUDO apt-get update -qq
-DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq --no-install-recommends postgresql >/dev/null

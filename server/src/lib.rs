@@ -7,16 +7,17 @@
 //!
 //! Durability: jobs live in a database (SQLite in the data directory, WAL
 //! and `synchronous = FULL`, by default; or a PostgreSQL shared by many API
-//! and worker processes); a job's inputs are written (and synced) into
-//! `jobs/<id>/` before its row is committed, and every result file is
-//! written to a temporary name, synced and renamed before the row says
-//! `succeeded`. Workers claim jobs under leases they renew; a job whose
+//! and worker processes); a job's files live in the artifact store (a
+//! folder, `<data-dir>/jobs/<id>/` by default, or an S3-compatible bucket):
+//! its inputs are written before its row is committed, and every result
+//! file is written whole (a folder's: to a temporary name, synced and
+//! renamed) before the row says `succeeded`. Workers claim jobs under leases they renew; a job whose
 //! worker died is claimed again when its lease runs out (with SQLite, on
 //! the next start), so every accepted job reaches a final state and no
 //! finished result is ever truncated.
 //!
-//! Modules: `db` (the two database engines behind one interface), `store`
-//! (jobs and their files), `worker` (claims, leases, worker threads, live
+//! Modules: `db` (the two database engines behind one interface),
+//! `artifacts` (the job files' object store), `store` (jobs and their files), `worker` (claims, leases, worker threads, live
 //! progress), `pipeline` (the calls into the optimizer),
 //! `api` (routes, handlers, bodies, the OpenAPI document), `error`
 //! (`ApiError`), `job` ([`JobState`]).
@@ -32,6 +33,7 @@ use axum::middleware::{self, Next};
 use axum::response::{IntoResponse, Response};
 
 mod api;
+mod artifacts;
 pub mod auth;
 mod db;
 mod error;
@@ -83,6 +85,9 @@ pub struct Config {
     /// The job database (`--database`): `sqlite:PATH` or `postgres://…`;
     /// `None`: `<data_dir>/jobs.sqlite`.
     pub database: Option<String>,
+    /// The artifact store of the job files (`--artifacts`): a folder,
+    /// `file://…` or `s3://bucket/prefix`; `None`: `<data_dir>/jobs`.
+    pub artifacts: Option<String>,
     /// How long a worker's claim on a job lasts without renewal
     /// (`--lease-seconds`); a job whose worker died runs again after it.
     pub lease: Duration,
@@ -104,6 +109,7 @@ impl Config {
             tenant_max_jobs: None,
             rate_limit: None,
             database: None,
+            artifacts: None,
             lease: Duration::from_secs(30),
         }
     }
@@ -145,7 +151,11 @@ impl AppState {
             .rate_limit
             .and_then(std::num::NonZeroU32::new)
             .map(|n| governor::RateLimiter::keyed(governor::Quota::per_second(n)));
-        let store = store::Store::open(&cfg.data_dir, cfg.database.as_deref())?;
+        let store = store::Store::open(
+            &cfg.data_dir,
+            cfg.database.as_deref(),
+            cfg.artifacts.as_deref(),
+        )?;
         store.recover()?;
         let workers = cfg.workers;
         let state = AppState(Arc::new(Inner {

@@ -43,10 +43,14 @@ struct WorkerArgs {
     /// The job database, shared with the API processes: postgres://…
     #[arg(long, value_name = "URL")]
     database: String,
-    /// The folder of the job files, shared with the API processes (the
-    /// same path on every machine, e.g. a network file system).
+    /// The local folder of this process's files (the artifact store's
+    /// default, `<data-dir>/jobs`, must then be the API processes' too).
     #[arg(long, default_value = "impostor-data")]
     data_dir: PathBuf,
+    /// The artifact store shared with the API processes (see the server's
+    /// --artifacts).
+    #[arg(long, value_name = "URL")]
+    artifacts: Option<String>,
     /// Jobs this process runs at once.
     #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u64).range(1..=256))]
     workers: u64,
@@ -134,12 +138,21 @@ struct Serve {
     /// Address to listen on.
     #[arg(long, default_value = "127.0.0.1:8080")]
     listen: String,
-    /// Directory of the job files (and of the SQLite database).
+    /// Directory of the SQLite database, of uploads being received and,
+    /// by default, of the job files (`<data-dir>/jobs`).
     #[arg(long, default_value = "impostor-data")]
     data_dir: PathBuf,
+    /// Where the job files (inputs and results) are kept: a folder or
+    /// `file:///path` (shared by every process, e.g. on a network file
+    /// system), or an S3-compatible bucket `s3://bucket/prefix` configured
+    /// by the AWS_* variables (AWS_ENDPOINT, AWS_REGION, AWS_ACCESS_KEY_ID,
+    /// AWS_SECRET_ACCESS_KEY, AWS_ALLOW_HTTP for a plain-HTTP endpoint).
+    /// Default: `<data-dir>/jobs`.
+    #[arg(long, value_name = "URL")]
+    artifacts: Option<String>,
     /// The job database: `sqlite:PATH` (default `<data-dir>/jobs.sqlite`)
     /// or `postgres://user@host:port/db`, shared by every API and worker
-    /// process (with the same --data-dir folder).
+    /// process (with the same --artifacts).
     #[arg(long, value_name = "URL")]
     database: Option<String>,
     /// `all`: serve and run jobs; `api`: serve only (workers elsewhere).
@@ -239,6 +252,7 @@ async fn serve_async(cli: Serve) -> ExitCode {
         Role::Api => 0,
     };
     cfg.database = cli.database;
+    cfg.artifacts = cli.artifacts;
     cli.limits.apply(&mut cfg);
     cfg.max_upload_mb = cli.max_upload_mb.max(1);
     cfg.max_queue = cli.max_queue.max(1);
@@ -326,6 +340,7 @@ fn worker(args: WorkerArgs) -> ExitCode {
     let mut cfg = Config::new(args.data_dir);
     cfg.workers = args.workers as usize;
     cfg.database = Some(args.database);
+    cfg.artifacts = args.artifacts;
     args.limits.apply(&mut cfg);
     let state = match AppState::open(cfg) {
         Ok(s) => s,

@@ -1,8 +1,7 @@
 //! The one module that calls the optimizer's job API: it checks a
 //! submission before it is accepted, and runs an accepted job (place,
-//! evaluate, report, bake) from the files in its directory.
+//! evaluate, report, bake) from its files in the artifact store.
 
-use std::path::{Path, PathBuf};
 use std::sync::atomic::AtomicBool;
 
 use axum::http::StatusCode;
@@ -18,8 +17,9 @@ use optimizer::report::render::render_html;
 use optimizer::report::run::{RunOutput, evaluate_placed, place_and_evaluate, single_run_report};
 
 use crate::api::types::JobSummary;
+use crate::artifacts::JobFiles;
 use crate::error::ApiError;
-use crate::store::write_atomic;
+use crate::store::{JOB, PVS, SCENE};
 
 /// Checks that a submission can run: the job and the scene parse, the
 /// scene has geometry where the job or baking needs it, and a PVS file is
@@ -88,12 +88,12 @@ pub(crate) struct RunOptions<'a> {
     pub progress: &'a (dyn Fn(&str, f64) + Sync),
 }
 
-/// Runs the job stored in `dir` (`scene`, `job.json`, optional `pvs.json`)
-/// and writes its results there, each atomically: `placement.json`,
+/// Runs the job of `files` (`scene`, `job.json`, optional `pvs.json`) and
+/// writes its results there, each atomically: `placement.json`,
 /// `report.html`, `evaluation.json` and, when baking, `impostors.glb`.
 /// Returns the JSON text of the job's [`JobSummary`].
-pub(crate) fn run_job(dir: &Path, opts: &RunOptions<'_>) -> optimizer::Result<String> {
-    run_with(dir, opts, |prepared, place, eval, ctl| {
+pub(crate) fn run_job(files: JobFiles<'_>, opts: &RunOptions<'_>) -> optimizer::Result<String> {
+    run_with(files, opts, |prepared, place, eval, ctl| {
         place_and_evaluate(prepared, place, eval, true, ctl)
     })
 }
@@ -112,23 +112,23 @@ pub(crate) fn tile_jobs(job: &[u8]) -> Result<Vec<Vec<u8>>, ApiError> {
         .collect()
 }
 
-/// The merge of a tiled job stored in `dir` whose tiles were run as jobs
-/// of their own in `tiles` (in tile order): their placements merged as
+/// The merge of the tiled job of `files` whose tiles were run as jobs of
+/// their own (`tiles`, in tile order): their placements merged as
 /// `impostor place` merges them in one process (the same bytes), then
 /// evaluated, reported and baked over the whole job like [`run_job`].
 pub(crate) fn merge_job(
-    dir: &Path,
-    tiles: &[PathBuf],
+    files: JobFiles<'_>,
+    tiles: &[JobFiles<'_>],
     opts: &RunOptions<'_>,
 ) -> optimizer::Result<String> {
-    run_with(dir, opts, |prepared, _, eval, ctl| {
+    run_with(files, opts, |prepared, _, eval, ctl| {
         let start = std::time::Instant::now();
         let mut parts = Vec::with_capacity(tiles.len());
-        for t in tiles {
-            let path = t.join("placement.json");
-            let bytes = std::fs::read(&path).map_err(|e| optimizer::Error::io(&path, e))?;
-            let p: Placement = serde_json::from_slice(&bytes)
-                .map_err(|e| optimizer::Error::Internal(format!("{}: {e}", path.display())))?;
+        for (k, t) in tiles.iter().enumerate() {
+            let bytes = t.read_required("placement.json")?;
+            let p: Placement = serde_json::from_slice(&bytes).map_err(|e| {
+                optimizer::Error::Internal(format!("tile {}'s placement.json: {e}", k + 1))
+            })?;
             parts.push(p);
         }
         let placement = optimizer::place::tiles::merge(prepared.job(), parts.iter())?;
@@ -145,22 +145,16 @@ pub(crate) fn merge_job(
     })
 }
 
-/// Loads the job stored in `dir`, runs `place` (which places, or merges,
-/// and evaluates) and writes the results.
+/// Loads the job of `files`, runs `place` (which places, or merges, and
+/// evaluates) and writes the results.
 fn run_with(
-    dir: &Path,
+    files: JobFiles<'_>,
     opts: &RunOptions<'_>,
     place: impl FnOnce(&Prepared, &PlaceOptions, &EvalOptions, &Control) -> optimizer::Result<RunOutput>,
 ) -> optimizer::Result<String> {
-    let io = |p: PathBuf| move |e| optimizer::Error::io(p, e);
-    let scene_bytes = std::fs::read(dir.join("scene")).map_err(io(dir.join("scene")))?;
-    let job_bytes = std::fs::read(dir.join("job.json")).map_err(io(dir.join("job.json")))?;
-    let pvs_path = dir.join("pvs.json");
-    let pvs_bytes = if pvs_path.exists() {
-        Some(std::fs::read(&pvs_path).map_err(io(pvs_path.clone()))?)
-    } else {
-        None
-    };
+    let scene_bytes = files.read_required(SCENE)?;
+    let job_bytes = files.read_required(JOB)?;
+    let pvs_bytes = files.read(PVS)?;
     let job = Job::from_json(&job_bytes, "job")?;
     // Geometry when the job needs it, for the evaluation's check of the
     // visible sets when the scene has any, and always when baking.
@@ -210,20 +204,14 @@ fn run_with(
     };
     let out = place(&prepared, &placement_opts, &eval, &ctl)?;
     ctl.check()?;
-    write_atomic(
-        &dir.join("placement.json"),
-        &optimizer::to_json_bytes(&out.place.placement)?,
-    )
-    .map_err(io(dir.join("placement.json")))?;
+    files.write(
+        "placement.json",
+        optimizer::to_json_bytes(&out.place.placement)?,
+    )?;
     let job_text: Value = serde_json::from_slice(&job_bytes).unwrap_or(Value::Null);
     let report = single_run_report("scene", &input, &job_text, &out);
-    write_atomic(&dir.join("report.html"), render_html(&report).as_bytes())
-        .map_err(io(dir.join("report.html")))?;
-    write_atomic(
-        &dir.join("evaluation.json"),
-        &optimizer::to_json_bytes(&out.eval)?,
-    )
-    .map_err(io(dir.join("evaluation.json")))?;
+    files.write("report.html", render_html(&report).into_bytes())?;
+    files.write("evaluation.json", optimizer::to_json_bytes(&out.eval)?)?;
     if opts.bake {
         ctl.check()?;
         ctl.progress("bake", 0.99, "baking the impostors");
@@ -235,7 +223,7 @@ fn run_with(
         // The bake does not stop part-way: a cancel during it is honoured
         // here (and by the worker, which ends a cancelled job `cancelled`).
         ctl.check()?;
-        write_atomic(&dir.join("impostors.glb"), &glb).map_err(io(dir.join("impostors.glb")))?;
+        files.write("impostors.glb", glb)?;
     }
     let summary = JobSummary {
         placement: out.place.placement.summary.clone(),

@@ -1,6 +1,8 @@
 //! Durable job storage: the job database ([`crate::db`]: SQLite's
 //! `jobs.sqlite` with WAL and `synchronous = FULL` by default, or a shared
-//! PostgreSQL) and one directory of files per job, written atomically.
+//! PostgreSQL) and the files of each job in the artifact store
+//! ([`crate::artifacts`]: `<data_dir>/jobs/<id>/` by default), written
+//! before the row that points to them is committed.
 //! Jobs are claimed by workers under leases (see [`Store::claim`]).
 //!
 //! A job has two ids: its row's integer id, internal (queue order, folder
@@ -11,14 +13,15 @@ use std::io;
 use std::path::{Path, PathBuf};
 use std::time::{SystemTime, UNIX_EPOCH};
 
+use crate::artifacts::{Artifacts, JobFiles};
 use crate::db::{Backend, Db, Value};
 use crate::job::JobState;
 
-/// The job database and the job directories under `<data_dir>/jobs/`;
-/// uploads arrive in `<data_dir>/uploads/` (see [`Staged`]).
+/// The job database and the job files; uploads arrive in
+/// `<data_dir>/uploads/` (see [`Staged`]).
 pub(crate) struct Store {
     db: Db,
-    jobs_dir: PathBuf,
+    artifacts: Artifacts,
     uploads_dir: PathBuf,
 }
 
@@ -30,8 +33,8 @@ pub(crate) const PVS: &str = "pvs.json";
 
 /// An upload being received: a folder of its own under `uploads/`, where
 /// the submission's parts are streamed as they arrive (the body is never
-/// held in memory), then moved into the job's folder by renaming when the
-/// job is accepted. Dropping it removes what is left, so a refused or
+/// held in memory), then streamed into the artifact store when the job is
+/// accepted. Dropping it removes what is left, so a refused or
 /// broken upload leaves nothing behind; a crash's leftovers are removed on
 /// the next start.
 pub(crate) struct Staged {
@@ -99,28 +102,6 @@ fn db_err(e: rusqlite::Error) -> io::Error {
     io::Error::other(e)
 }
 
-/// Writes `bytes` to `path` atomically: temporary file, sync, rename, sync
-/// of the directory. A crash leaves either the old file or the whole new
-/// one, never a truncated result.
-pub(crate) fn write_atomic(path: &Path, bytes: &[u8]) -> io::Result<()> {
-    use std::io::Write;
-    // A name of its own: two workers may write the same job's results
-    // (one whose lease ran out while it still ran).
-    let tmp = path.with_extension(format!("tmp-{}", uuid::Uuid::new_v4().simple()));
-    {
-        let mut f = std::fs::File::create(&tmp)?;
-        f.write_all(bytes)?;
-        f.sync_all()?;
-    }
-    std::fs::rename(&tmp, path)?;
-    if let Some(dir) = path.parent()
-        && let Ok(d) = std::fs::File::open(dir)
-    {
-        let _ = d.sync_all();
-    }
-    Ok(())
-}
-
 /// What a worker's lease renewal found.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub(crate) struct Renewal {
@@ -166,18 +147,22 @@ fn state(s: JobState) -> Value {
 }
 
 impl Store {
-    /// Opens (or creates) the job directory under `data_dir` and the
+    /// Opens (or creates) the artifact store (`artifacts`, by default the
+    /// folder `<data_dir>/jobs`), the uploads folder under `data_dir` and the
     /// database (`database`: `sqlite:PATH` or `postgres://…`; default
     /// `<data_dir>/jobs.sqlite`), applying the migrations it lacks.
-    pub fn open(data_dir: &Path, database: Option<&str>) -> io::Result<Store> {
-        let jobs_dir = data_dir.join("jobs");
-        std::fs::create_dir_all(&jobs_dir)?;
+    pub fn open(
+        data_dir: &Path,
+        database: Option<&str>,
+        artifacts: Option<&str>,
+    ) -> io::Result<Store> {
+        let artifacts = Artifacts::open(artifacts, &data_dir.join("jobs"))?;
         let uploads_dir = data_dir.join("uploads");
         std::fs::create_dir_all(&uploads_dir)?;
         let db = Db::open(database, data_dir, sqlite_setup)?;
         Ok(Store {
             db,
-            jobs_dir,
+            artifacts,
             uploads_dir,
         })
     }
@@ -194,8 +179,8 @@ impl Store {
 
     /// On a process's start. SQLite (one process owns the database): puts
     /// the jobs a previous process left `running` back in the queue and
-    /// removes the directories of jobs that were never accepted and the
-    /// uploads it was receiving. PostgreSQL (shared): nothing; a job whose
+    /// removes the files of jobs that were never accepted and the uploads
+    /// it was receiving. PostgreSQL (shared): nothing; a job whose
     /// worker died is claimed again when its lease runs out.
     pub fn recover(&self) -> io::Result<()> {
         if self.backend() == Backend::Postgres {
@@ -207,8 +192,8 @@ impl Store {
              WHERE state IN (?1, ?2)",
             &[state(JobState::Queued), state(JobState::Running)],
         )?;
-        // Inputs are written before their row is committed: a directory
-        // without a row belongs to a submission that was never accepted.
+        // Inputs are written before their row is committed: files without
+        // a row belong to a submission that was never accepted.
         let known: Vec<i64> = self
             .db
             .query("SELECT id FROM jobs", &[])?
@@ -219,19 +204,25 @@ impl Store {
         for entry in std::fs::read_dir(&self.uploads_dir)? {
             let _ = std::fs::remove_dir_all(entry?.path());
         }
-        for entry in std::fs::read_dir(&self.jobs_dir)? {
-            let entry = entry?;
-            let id = entry.file_name().to_string_lossy().parse::<i64>().ok();
-            if id.is_none_or(|id| !known.contains(&id)) {
-                let _ = std::fs::remove_dir_all(entry.path());
+        for id in self.artifacts.job_ids()? {
+            if !known.contains(&id) {
+                self.artifacts.delete_job(id)?;
             }
         }
         Ok(())
     }
 
-    /// The directory of job `id`'s inputs and results.
-    pub fn job_dir(&self, id: i64) -> PathBuf {
-        self.jobs_dir.join(id.to_string())
+    /// Job `id`'s inputs and results.
+    pub fn files(&self, id: i64) -> JobFiles<'_> {
+        JobFiles {
+            artifacts: &self.artifacts,
+            id,
+        }
+    }
+
+    /// The artifact store.
+    pub fn artifacts(&self) -> &Artifacts {
+        &self.artifacts
     }
 
     /// A new, empty staging folder for an upload.
@@ -244,9 +235,9 @@ impl Store {
     }
 
     /// Stores a new job of `tenant` (`None` without tokens) from the
-    /// inputs in `staged` (their files already synced): allocates its ids,
-    /// moves the inputs into its folder by renaming (no copy), then commits
-    /// its row as `queued`. Returns the internal and the public id.
+    /// inputs in `staged`: allocates its ids, writes the inputs to the
+    /// artifact store, then commits its row as `queued`. Returns the
+    /// internal and the public id.
     pub fn create(
         &self,
         staged: &Staged,
@@ -256,22 +247,18 @@ impl Store {
     ) -> io::Result<(i64, String)> {
         use std::io::Read;
         let id = self.next_id()?;
-        let dir = self.job_dir(id);
-        let _ = std::fs::remove_dir_all(&dir);
-        std::fs::create_dir_all(&dir)?;
         let mut magic = [0u8; 4];
         let glb = std::fs::File::open(staged.path(SCENE))?
             .read_exact(&mut magic)
             .is_ok()
             && &magic == b"glTF";
         for name in [SCENE, JOB, PVS] {
-            match std::fs::rename(staged.path(name), dir.join(name)) {
-                Err(e) if name == PVS && e.kind() == io::ErrorKind::NotFound => {}
-                r => r?,
+            if !self.artifacts.put_file(id, name, &staged.path(name))? && name != PVS {
+                return Err(io::Error::new(
+                    io::ErrorKind::NotFound,
+                    format!("the upload has no {name}"),
+                ));
             }
-        }
-        if let Ok(d) = std::fs::File::open(&dir) {
-            d.sync_all()?;
         }
         let kind = if glb { "glb" } else { "json" };
         let uid = new_uid();
@@ -295,21 +282,15 @@ impl Store {
         };
         // A tiled job: the parent's row first (it waits until all its
         // tiles' rows exist and are final), then one job per tile, its
-        // inputs linked to the parent's (no copy).
+        // inputs copied from the parent's (hard links in a folder).
         let n = (!tiles.is_empty()).then_some(tiles.len() as i64);
         row(id, &uid, bake, None, n)?;
         for t in tiles {
             let child = self.next_id()?;
-            let cdir = self.job_dir(child);
-            let _ = std::fs::remove_dir_all(&cdir);
-            std::fs::create_dir_all(&cdir)?;
             for name in [SCENE, PVS] {
-                let from = dir.join(name);
-                if from.exists() && std::fs::hard_link(&from, cdir.join(name)).is_err() {
-                    std::fs::copy(&from, cdir.join(name))?;
-                }
+                self.artifacts.copy(id, child, name)?;
             }
-            write_atomic(&cdir.join(JOB), t)?;
+            self.artifacts.put(child, JOB, t.clone())?;
             row(child, &new_uid(), false, Some(id), None)?;
         }
         Ok((id, uid))
@@ -346,10 +327,10 @@ impl Store {
         let staged = tokio::runtime::Builder::new_current_thread()
             .build()?
             .block_on(self.stage())?;
-        write_atomic(&staged.path(SCENE), scene)?;
-        write_atomic(&staged.path(JOB), job)?;
+        std::fs::write(staged.path(SCENE), scene)?;
+        std::fs::write(staged.path(JOB), job)?;
         if let Some(p) = pvs {
-            write_atomic(&staged.path(PVS), p)?;
+            std::fs::write(staged.path(PVS), p)?;
         }
         self.create(&staged, false, tenant, &[])
     }
@@ -669,17 +650,19 @@ impl Store {
             .collect())
     }
 
-    /// Removes job `id`'s row and its tiles', then their files.
+    /// Removes job `id`'s row and its tiles', then their files (a file left
+    /// by a failure here is removed by the next start's recovery, SQLite).
     pub fn delete(&self, id: i64) -> io::Result<()> {
         let children: Vec<i64> = self.children(id)?.iter().map(|c| c.id).collect();
         self.db.execute(
             "DELETE FROM jobs WHERE id = ?1 OR parent_id = ?1",
             &[int(id)],
         )?;
-        for c in children {
-            let _ = std::fs::remove_dir_all(self.job_dir(c));
+        for c in children.into_iter().chain([id]) {
+            if let Err(e) = self.artifacts.delete_job(c) {
+                tracing::warn!(job = c, "files not removed: {e}");
+            }
         }
-        let _ = std::fs::remove_dir_all(self.job_dir(id));
         Ok(())
     }
 
@@ -782,7 +765,7 @@ mod tests {
             )
             .unwrap();
         }
-        let store = Store::open(&dir, None).unwrap();
+        let store = Store::open(&dir, None, None).unwrap();
         let old = store.row(1).unwrap().unwrap().uid;
         assert_eq!(
             uuid::Uuid::parse_str(&old).unwrap().get_version(),
@@ -798,7 +781,7 @@ mod tests {
         assert_eq!(store.row(2).unwrap().unwrap().uid, ua);
         // Reopening keeps every id.
         drop(store);
-        let store = Store::open(&dir, None).unwrap();
+        let store = Store::open(&dir, None, None).unwrap();
         assert_eq!(store.find(&old, None).unwrap().map(|r| r.id), Some(1));
         assert_eq!(store.find(&ua, None).unwrap().map(|r| r.id), Some(2));
         let _ = std::fs::remove_dir_all(&dir);
@@ -809,7 +792,7 @@ mod tests {
     #[test]
     fn tenants_see_only_their_jobs() {
         let dir = temp_dir("tenant");
-        let store = Store::open(&dir, None).unwrap();
+        let store = Store::open(&dir, None, None).unwrap();
         let (a, ua) = store
             .create_from_bytes(b"{}", b"{}", None, Some("a"))
             .unwrap();

@@ -271,7 +271,7 @@ fn run(st: &AppState, owner: &str, id: i64, bake: bool, merge: bool) {
         max_memory_bytes: st.0.cfg.job_max_memory_bytes,
         progress: &progress,
     };
-    let dir = store.job_dir(id);
+    let files = store.files(id);
     // The time limit: a watchdog asks the job to stop unless it ends first.
     let (ended, watch) = mpsc::channel::<()>();
     let limit = st.0.cfg.job_max_seconds;
@@ -296,9 +296,9 @@ fn run(st: &AppState, owner: &str, id: i64, bake: bool, merge: bool) {
         // A panic in the optimizer fails this job, not the worker.
         let outcome = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
             if merge {
-                merge_tiles(store, id, &dir, &opts)
+                merge_tiles(store, id, &opts)
             } else {
-                run_job(&dir, &opts)
+                run_job(files, &opts)
             }
         }));
         drop(lease_end);
@@ -335,17 +335,16 @@ fn run(st: &AppState, owner: &str, id: i64, bake: bool, merge: bool) {
     release_memory();
 }
 
-/// The merge of tiled job `id` (in `dir`) once its tiles are final: fails
-/// naming the first tile that did not succeed.
+/// The merge of tiled job `id` once its tiles are final: fails naming the
+/// first tile that did not succeed.
 fn merge_tiles(
     store: &crate::store::Store,
     id: i64,
-    dir: &std::path::Path,
     opts: &RunOptions<'_>,
 ) -> optimizer::Result<String> {
     let tiles = store
         .children(id)
-        .map_err(|e| optimizer::Error::io(dir, e))?;
+        .map_err(|e| optimizer::Error::Internal(format!("the tiles of job {id}: {e}")))?;
     for (k, t) in tiles.iter().enumerate() {
         match t.state {
             JobState::Succeeded => {}
@@ -360,8 +359,8 @@ fn merge_tiles(
             }
         }
     }
-    let dirs: Vec<_> = tiles.iter().map(|t| store.job_dir(t.id)).collect();
-    merge_job(dir, &dirs, opts)
+    let parts: Vec<_> = tiles.iter().map(|t| store.files(t.id)).collect();
+    merge_job(store.files(id), &parts, opts)
 }
 
 /// Stops the workers of `st`: no more claims; running jobs are stopped and

@@ -1,5 +1,6 @@
 //! Scale-out on PostgreSQL: one API process and several worker processes
-//! (the real binary) sharing a database and a data folder; a worker killed
+//! (the real binary), each with a data folder of its own, sharing a
+//! database and an artifact store (`--artifacts file://…`); a worker killed
 //! with SIGKILL mid-job loses its lease and another runs the job again.
 
 use std::net::SocketAddr;
@@ -36,11 +37,17 @@ fn succeeded(addr: SocketAddr, id: &str, deadline: Instant) -> Value {
     }
 }
 
+/// The artifact store every process of the deployment in `dir` shares.
+fn artifacts(dir: &Path) -> String {
+    format!("file://{}", dir.join("artifacts").display())
+}
+
 fn api(dir: &Path, db: &str, addr: SocketAddr) -> Child {
     let child = Command::new(BIN)
         .args(["--no-auth", "--role", "api", "--listen", &addr.to_string()])
-        .args(["--max-queue", "100", "--database", db, "--data-dir"])
-        .arg(dir)
+        .args(["--max-queue", "100", "--database", db])
+        .args(["--artifacts", &artifacts(dir), "--data-dir"])
+        .arg(dir.join("api"))
         .stdout(Stdio::null())
         .stderr(Stdio::null())
         .spawn()
@@ -56,25 +63,24 @@ fn api(dir: &Path, db: &str, addr: SocketAddr) -> Child {
     child
 }
 
+/// A worker process of the deployment in `dir`, with a data folder of its
+/// own: what it shares with the others is the database and the artifacts.
 fn worker(dir: &Path, db: &str) -> Child {
+    static STARTED: std::sync::atomic::AtomicUsize = std::sync::atomic::AtomicUsize::new(0);
+    let n = STARTED.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
     Command::new(BIN)
-        .args([
-            "worker",
-            "--lease-seconds",
-            "2",
-            "--database",
-            db,
-            "--data-dir",
-        ])
-        .arg(dir)
+        .args(["worker", "--lease-seconds", "2", "--database", db])
+        .args(["--artifacts", &artifacts(dir), "--data-dir"])
+        .arg(dir.join(format!("worker-{n}")))
         .stdout(Stdio::null())
         .stderr(Stdio::null())
         .spawn()
         .expect("start a worker process")
 }
 
-/// A database of the tests' PostgreSQL, an empty data folder, an API
-/// process on a free loopback port and `workers` worker processes.
+/// A database of the tests' PostgreSQL, an empty folder for the
+/// deployment's files, an API process on a free loopback port and
+/// `workers` worker processes.
 fn deploy(name: &str, workers: usize) -> (String, PathBuf, SocketAddr, Child, Vec<Child>) {
     let db = common::postgres::database();
     let dir = std::env::temp_dir().join(format!("impostor-{name}-{}", std::process::id()));
@@ -249,6 +255,11 @@ fn a_tiled_job_runs_its_tiles_on_the_workers_and_merges_them() {
     assert_eq!(status["summary"]["violations_in_cpv_views"], 0, "{status}");
     let (_, list) = get_json(addr, "/v1/jobs");
     assert_eq!(list["jobs"].as_array().unwrap().len(), 1, "{list}");
+    // The files are in the shared store (the job's and its four tiles'),
+    // none in a process's own folder.
+    let stored = std::fs::read_dir(dir.join("artifacts")).unwrap().count();
+    assert_eq!(stored, 5);
+    assert!(!dir.join("api").join("jobs").exists());
     let mut pg = postgres::Client::connect(&db, postgres::NoTls).unwrap();
     let rows = pg
         .query(
@@ -358,4 +369,31 @@ fn a_worker_refuses_a_database_it_cannot_share() {
     assert_eq!(out.status.code(), Some(2));
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(err.contains("postgres://"), "{err}");
+}
+
+/// An artifact store the server cannot use is refused at the start, exit
+/// 2, naming the option and what it takes.
+#[test]
+fn an_unusable_artifact_store_is_refused_at_the_start() {
+    let dir = std::env::temp_dir().join(format!("impostor-badart-{}", std::process::id()));
+    let file = dir.join("a-file");
+    std::fs::create_dir_all(&dir).unwrap();
+    std::fs::write(&file, b"x").unwrap();
+    let file_url = format!("file://{}", file.display());
+    for (url, says) in [
+        ("gs://bucket/jobs", "unsupported scheme"),
+        ("s3:///jobs", "no bucket"),
+        (file_url.as_str(), "artifacts folder"),
+    ] {
+        let out = Command::new(BIN)
+            .args(["--no-auth", "--listen", "127.0.0.1:0", "--artifacts", url])
+            .arg("--data-dir")
+            .arg(dir.join("data"))
+            .output()
+            .unwrap();
+        assert_eq!(out.status.code(), Some(2), "{url}");
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(err.contains(says), "{url}: {err}");
+    }
+    let _ = std::fs::remove_dir_all(&dir);
 }

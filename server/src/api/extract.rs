@@ -181,7 +181,9 @@ async fn stream_to(
     })? {
         file.write_all(&chunk).await.map_err(ApiError::internal)?;
     }
-    file.sync_all().await.map_err(ApiError::internal)
+    // Not synced: the upload is copied (and synced) into the artifact
+    // store when it is accepted, and removed after.
+    file.flush().await.map_err(ApiError::internal)
 }
 
 impl Submission {
@@ -279,7 +281,7 @@ impl Submission {
                     .map_err(ApiError::internal)?;
                 use tokio::io::AsyncWriteExt;
                 f.write_all(&bytes).await.map_err(ApiError::internal)?;
-                f.sync_all().await.map_err(ApiError::internal)?;
+                f.flush().await.map_err(ApiError::internal)?;
             }
         }
         Ok(Submission {

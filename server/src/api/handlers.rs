@@ -224,9 +224,9 @@ async fn result_file(
             format!("job {id} is {state}; results exist once it has succeeded"),
         ));
     }
-    match tokio::fs::read(st.0.store.job_dir(row.id).join(file)).await {
-        Ok(bytes) => Ok(bytes),
-        Err(e) if e.kind() == std::io::ErrorKind::NotFound => Err(ApiError::new(
+    match st.0.store.artifacts().get_async(row.id, file).await {
+        Ok(Some(bytes)) => Ok(bytes),
+        Ok(None) => Err(ApiError::new(
             StatusCode::NOT_FOUND,
             format!(
                 "job {id} has no {file} (impostors are baked only when the job asks for it with \"bake\": true)"
@@ -366,8 +366,8 @@ pub(crate) async fn delete(
     }))
 }
 
-/// `GET /healthz`: the service and its database answer (503 when the
-/// database does not).
+/// `GET /healthz`: the service, its database and its artifact store answer
+/// (503 when either does not).
 pub(crate) async fn healthz(State(st): State<AppState>) -> Result<Json<Health>, ApiError> {
     blocking(&st, |st| {
         st.0.store.ping().map_err(|e| {
@@ -377,7 +377,15 @@ pub(crate) async fn healthz(State(st): State<AppState>) -> Result<Json<Health>, 
                 "the job database does not answer",
             )
         })?;
+        st.0.store.artifacts().ping().map_err(|e| {
+            tracing::warn!("health: the artifact store does not answer: {e}");
+            ApiError::new(
+                StatusCode::SERVICE_UNAVAILABLE,
+                "the artifact store does not answer",
+            )
+        })?;
         Ok(Json(Health {
+            artifacts: st.0.store.artifacts().kind(),
             status: "ok",
             version: OPTIMIZER_VERSION,
             database: match st.0.store.backend() {

@@ -168,6 +168,9 @@ pub struct DeleteAnswer {
 /// The service is up.
 #[derive(Debug, Serialize, JsonSchema)]
 pub struct Health {
+    /// The artifact store of the job files, which answered: `file` (a
+    /// folder) or `s3`.
+    pub artifacts: &'static str,
     /// The job database's engine, which answered: `sqlite` or `postgres`.
     pub database: &'static str,
     /// Always `ok` (a database that does not answer is a 503).
@@ -219,6 +222,7 @@ mod tests {
             state: DeleteOutcome::Cancelling,
         });
         assert_sorted(&Health {
+            artifacts: "file",
             database: "sqlite",
             status: "ok",
             version: "0",
