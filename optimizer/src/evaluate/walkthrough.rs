@@ -81,8 +81,12 @@ pub struct PathTimes {
 
 /// Positions sampled for the problem tour, about.
 const TOUR_POSITIONS: f64 = 1024.0;
-/// Directions per position: yaws, at each of up to two pitches.
+/// Directions per position: yaws, at each of the tour's pitches.
 const TOUR_YAWS: u32 = 16;
+/// Rounds of the local search that refines each stop (each halves its steps).
+const TOUR_REFINE_ROUNDS: u32 = 8;
+/// The slowest positions refined before the stops are chosen among them.
+const TOUR_REFINED: usize = 64;
 /// The most waypoints of the tour.
 const TOUR_STOPS: usize = 8;
 /// Points of the spline per segment between two waypoints.
@@ -102,14 +106,17 @@ fn catmull_rom(p0: DVec3, p1: DVec3, p2: DVec3, p3: DVec3, t: f64) -> DVec3 {
 impl Prepared<'_> {
     /// The walkthrough of the placement's job and its frame times with the
     /// placement, with no impostor, and as the placement estimates them.
-    /// The path is the job's own, or else a tour through the problem: the
-    /// positions (at mid-height, on a grid over the view space) whose
-    /// slowest direction without impostors is slowest, up to eight apart
-    /// from each other, visited nearest first from the slowest in a closed
-    /// Catmull-Rom loop, the camera turning to face each stop's slowest
-    /// direction as it passes. The tour depends on the scene and the job's
-    /// view space, visibility and camera only, not on the placement, so
-    /// every run of a report follows the same path.
+    /// The path is the job's own, or else a tour through the problem: on a
+    /// grid of positions over the view space (at mid-height; 16 yaws at the
+    /// pitches of [`tour_pitches`]), the slowest without impostors are
+    /// refined by a local search (position, height, yaw, pitch) to the
+    /// slowest view near each; up to eight of those, apart from each other,
+    /// are visited nearest first from the slowest in a closed Catmull-Rom
+    /// loop, the frame nearest each stop showing the stop's view and the
+    /// camera turning between them. The tour depends on the scene and the
+    /// job's view space, visibility, camera and cost model only, not on
+    /// the placement, so every run of a report follows the same path (found
+    /// once per preparation).
     pub fn walkthrough_times(&self, placement: &Placement, source: &str) -> Result<PathTimes> {
         let job = self.job();
         let scene = self.scene();
@@ -169,7 +176,9 @@ impl Prepared<'_> {
     pub fn walkthrough_path(&self) -> Vec<View> {
         match walkthrough_views(self.job()) {
             Some(v) => v,
-            None => self.problem_tour(&|v| self.bare_time(v)),
+            None => self
+                .cached_tour(|| self.problem_tour(&|v| self.bare_time(v)))
+                .to_vec(),
         }
     }
 
@@ -217,12 +226,11 @@ impl Prepared<'_> {
         let nz = (TOUR_POSITIONS / f64::from(nx)).round().clamp(1.0, 256.0) as u32;
         let y = (lo.y + hi.y) * 0.5;
         let [p0, p1] = job.view_space.pitch_deg;
-        let level = 0.0f64.clamp(p0, p1);
-        let mut pitches = vec![level];
-        let mid = (p0 + p1) * 0.5;
-        if (mid - level).abs() > 10.0 {
-            pitches.push(mid);
-        }
+        let pitches = tour_pitches(p0, p1);
+        let dir_of = |yaw: f64, pitch: f64| {
+            let (sp, cp) = pitch.to_radians().sin_cos();
+            DVec3::new(cp * yaw.cos(), sp, cp * yaw.sin())
+        };
         let positions: Vec<DVec3> = (0..nz)
             .flat_map(|k| {
                 (0..nx).map(move |i| {
@@ -235,18 +243,16 @@ impl Prepared<'_> {
             })
             .collect();
         // Per position: its slowest direction and time.
-        let worst: Vec<(f64, DVec3)> = positions
+        let worst: Vec<(f64, f64, f64)> = positions
             .par_iter()
             .map(|&eye| {
-                let mut best = (f64::NEG_INFINITY, DVec3::X);
+                let mut best = (f64::NEG_INFINITY, 0.0, 0.0);
                 for &pitch in &pitches {
-                    let (sp, cp) = pitch.to_radians().sin_cos();
                     for k in 0..TOUR_YAWS {
                         let yaw = std::f64::consts::TAU * f64::from(k) / f64::from(TOUR_YAWS);
-                        let dir = DVec3::new(cp * yaw.cos(), sp, cp * yaw.sin());
-                        let t = bare((eye, dir));
+                        let t = bare((eye, dir_of(yaw, pitch)));
                         if t > best.0 {
-                            best = (t, dir);
+                            best = (t, yaw, pitch);
                         }
                     }
                 }
@@ -255,19 +261,63 @@ impl Prepared<'_> {
             .collect();
         let mut order: Vec<usize> = (0..positions.len()).collect();
         order.sort_by(|&a, &b| worst[b].0.total_cmp(&worst[a].0).then(a.cmp(&b)));
+        // The slowest positions refined by a local search (position within
+        // half a grid step, the height band, yaw and pitch; steps halved
+        // each round) to the slowest view near each, which the tour shows.
+        let step = DVec3::new(size.x / f64::from(nx), 0.0, size.z / f64::from(nz)) * 0.5;
+        let mut refined: Vec<(f64, DVec3, f64, f64)> = order[..order.len().min(TOUR_REFINED)]
+            .par_iter()
+            .map(|&s| {
+                let (t, yaw, pitch) = worst[s];
+                let mut best = (t, positions[s], yaw, pitch);
+                let (mut d, mut dyaw, mut dpitch) = (
+                    step,
+                    std::f64::consts::PI / f64::from(TOUR_YAWS),
+                    TOUR_PITCH_STEP * 0.5,
+                );
+                for _ in 0..TOUR_REFINE_ROUNDS {
+                    let (_, eye, yaw, pitch) = best;
+                    let moves = [
+                        (eye + DVec3::X * d.x, yaw, pitch),
+                        (eye - DVec3::X * d.x, yaw, pitch),
+                        (eye + DVec3::Z * d.z, yaw, pitch),
+                        (eye - DVec3::Z * d.z, yaw, pitch),
+                        (DVec3::new(eye.x, lo.y, eye.z), yaw, pitch),
+                        (DVec3::new(eye.x, hi.y, eye.z), yaw, pitch),
+                        (eye, yaw + dyaw, pitch),
+                        (eye, yaw - dyaw, pitch),
+                        (eye, yaw, (pitch + dpitch).min(p1)),
+                        (eye, yaw, (pitch - dpitch).max(p0)),
+                    ];
+                    for (e, yw, pt) in moves {
+                        let e = e.clamp(lo, hi);
+                        let t = bare((e, dir_of(yw, pt)));
+                        if t > best.0 {
+                            best = (t, e, yw, pt);
+                        }
+                    }
+                    d *= 0.5;
+                    dyaw *= 0.5;
+                    dpitch *= 0.5;
+                }
+                best
+            })
+            .collect();
+        // Stops: the slowest refined views, spaced apart.
+        refined.sort_by(|a, b| b.0.total_cmp(&a.0));
         let spacing = (size.x * size.x + size.z * size.z).sqrt() / TOUR_STOPS as f64;
-        let mut stops: Vec<usize> = Vec::new();
-        for i in order {
-            if stops.len() == TOUR_STOPS {
+        let mut chosen: Vec<(f64, DVec3, f64, f64)> = Vec::new();
+        for r in refined {
+            if chosen.len() == TOUR_STOPS {
                 break;
             }
-            if stops
-                .iter()
-                .all(|&s| positions[s].distance(positions[i]) >= spacing)
-            {
-                stops.push(i);
+            if chosen.iter().all(|c| c.1.distance(r.1) >= spacing) {
+                chosen.push(r);
             }
         }
+        let positions: Vec<DVec3> = chosen.iter().map(|r| r.1).collect();
+        let worst: Vec<(f64, DVec3)> = chosen.iter().map(|r| (r.0, dir_of(r.2, r.3))).collect();
+        let stops: Vec<usize> = (0..positions.len()).collect();
         // Nearest first from the slowest.
         let mut tour = vec![stops[0]];
         let mut left: Vec<usize> = stops[1..].to_vec();
@@ -311,6 +361,58 @@ impl Prepared<'_> {
             pts.push((at(0), worst[tour[0]].1));
             pts
         };
-        resample(&points, TOUR_FRAMES, lo, hi)
+        let mut frames = resample(&points, TOUR_FRAMES, lo, hi);
+        // The frame nearest each stop is the stop's own slowest view, so
+        // the tour shows the slowest views it found, not views beside them.
+        for &s in &tour {
+            let nearest = frames
+                .iter()
+                .enumerate()
+                .map(|(k, f)| (k, f.0.distance_squared(positions[s])))
+                .min_by(|a, b| a.1.total_cmp(&b.1).then(a.0.cmp(&b.0)))
+                .map(|(k, _)| k);
+            if let Some(k) = nearest {
+                frames[k] = (positions[s], worst[s].1);
+            }
+        }
+        frames
+    }
+}
+
+/// Pitch steps of the problem tour, degrees.
+const TOUR_PITCH_STEP: f64 = 20.0;
+
+/// The pitches the problem tour samples in the band `[p0, p1]`: level (or
+/// the band's nearest) and every [`TOUR_PITCH_STEP`] up and down from it
+/// within the band, at most 60° away, and the band's middle.
+fn tour_pitches(p0: f64, p1: f64) -> Vec<f64> {
+    let level = 0.0f64.clamp(p0, p1);
+    let mut pitches = vec![level, (p0 + p1) * 0.5];
+    for k in 1..=3 {
+        let d = TOUR_PITCH_STEP * f64::from(k);
+        for p in [level - d, level + d] {
+            if (p0..=p1).contains(&p) {
+                pitches.push(p);
+            }
+        }
+    }
+    pitches.sort_by(f64::total_cmp);
+    pitches.dedup_by(|a, b| (*a - *b).abs() < 1.0);
+    pitches
+}
+
+#[cfg(test)]
+mod tests {
+    use super::tour_pitches;
+
+    #[test]
+    fn tour_pitches_cover_the_band_around_level() {
+        assert_eq!(
+            tour_pitches(-90.0, 90.0),
+            [-60.0, -40.0, -20.0, 0.0, 20.0, 40.0, 60.0]
+        );
+        // A band above the roofs looking down: its top, steps down, its middle.
+        assert_eq!(tour_pitches(-90.0, -10.0), [-70.0, -50.0, -30.0, -10.0]);
+        assert_eq!(tour_pitches(-5.0, 5.0), [0.0]);
     }
 }

@@ -1,10 +1,10 @@
 //! A scene input prepared for one job: the job and its visibility.
 
-use std::sync::Arc;
+use std::sync::{Arc, Mutex};
 use std::time::Instant;
 
 use crate::Result;
-use crate::api::job::Job;
+use crate::api::job::{Camera, CostModelParams, Job};
 use crate::api::stats::StageTime;
 use crate::input::SceneInput;
 use crate::scene::Scene;
@@ -21,7 +21,17 @@ pub struct Prepared<'a> {
     job_name: String,
     visibility: Option<Arc<Visibility<'a>>>,
     seconds: Vec<StageTime>,
+    /// The problem tours found for this view space and visibility, by the
+    /// camera and cost model they were timed with (shared with the
+    /// preparations made by [`Prepared::with_job`]).
+    tours: Tours,
 }
+
+/// Problem tours by (camera, cost model).
+type Tours = Arc<Mutex<Vec<(Camera, CostModelParams, Arc<Vec<View>>)>>>;
+
+/// A viewpoint and a viewing direction.
+type View = (glam::DVec3, glam::DVec3);
 
 impl<'a> Prepared<'a> {
     /// Prepares `input` for `job` (named `job_name` in errors). Fails when
@@ -49,6 +59,7 @@ impl<'a> Prepared<'a> {
             job_name: job_name.into(),
             visibility,
             seconds,
+            tours: Tours::default(),
         })
     }
 
@@ -64,6 +75,7 @@ impl<'a> Prepared<'a> {
                 job_name: self.job_name.clone(),
                 visibility: self.visibility.clone(),
                 seconds: self.seconds.clone(),
+                tours: self.tours.clone(),
             })
         } else {
             Prepared::new(self.input, job, &self.job_name)
@@ -78,6 +90,19 @@ impl<'a> Prepared<'a> {
             && a.problem_views.cell_size == job.problem_views.cell_size
             && a.problem_views.grid_origin == job.problem_views.grid_origin
             && a.visibility == job.visibility
+    }
+
+    /// The problem tour for this job's camera and cost model: `find`'s,
+    /// found once per preparation sharing this visibility.
+    pub(crate) fn cached_tour(&self, find: impl FnOnce() -> Vec<View>) -> Arc<Vec<View>> {
+        let key = (&self.job.camera, &self.job.cost_model);
+        let mut tours = self.tours.lock().unwrap_or_else(|e| e.into_inner());
+        if let Some((_, _, t)) = tours.iter().find(|(c, m, _)| (c, m) == key) {
+            return t.clone();
+        }
+        let tour = Arc::new(find());
+        tours.push((key.0.clone(), key.1.clone(), tour.clone()));
+        tour
     }
 
     /// The scene input.
