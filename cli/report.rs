@@ -39,6 +39,11 @@ pub struct ReportArgs {
     /// Views per evaluation.
     #[arg(long, default_value_t = 4000)]
     views: u64,
+    /// Also bake the impostors of each run of the base job and its sweeps
+    /// and chart their baked memory against the placement's estimate (the
+    /// scene needs geometry: a .glb or .gltf).
+    #[arg(long)]
+    bake: bool,
     /// Output directory.
     #[arg(short, long)]
     out: PathBuf,
@@ -64,7 +69,14 @@ pub fn run(a: ReportArgs) -> Result<ExitCode> {
         .map(|s| report::run::parse_sweep(s))
         .collect::<Result<Vec<_>>>()?;
     let budgets = report::run::parse_budgets(&a.budgets)?;
-    let input = a.input.load(&parsed, GeometryUse::WhenNeeded)?;
+    let input = a.input.load(
+        &parsed,
+        if a.bake {
+            GeometryUse::Required
+        } else {
+            GeometryUse::WhenNeeded
+        },
+    )?;
     std::fs::create_dir_all(&a.out).map_err(|e| Error::io(&a.out, e))?;
     let name = a
         .input
@@ -84,6 +96,7 @@ pub fn run(a: ReportArgs) -> Result<ExitCode> {
             stability: a.stability,
             budgets,
             views: a.views,
+            bake: a.bake,
         },
         &Control::observed(&observer),
     )?;

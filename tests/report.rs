@@ -274,6 +274,74 @@ fn the_failure_scene_leaves_problem_views_unsolved_for_every_method() {
     }
 }
 
+/// `report --bake` bakes each run and charts each impostor's baked memory
+/// against its estimate; the totals are `impostor bake`'s for the same
+/// placement, and per impostor the baked memory never exceeds the estimate.
+#[test]
+fn a_baked_report_sets_baked_memory_against_the_estimate() {
+    let dir = tmp("report-bake");
+    let city = city("0.1");
+    let job = root().join("fixtures/jobs/city-small-flyover.json");
+    let out = dir.join("r");
+    let o = run(&[
+        "report",
+        s(&city),
+        "--job",
+        s(&job),
+        "--methods",
+        "shafts",
+        "--views",
+        "200",
+        "--bake",
+        "-o",
+        s(&out),
+    ]);
+    assert!(matches!(code(&o), 0), "{}", stderr(&o));
+    let r = read_json(&out.join("report.json"));
+    let run0 = &r["runs"][0];
+    let b = &run0["bake"];
+    assert_eq!(b["estimated_bytes"], run0["memory_bytes"], "{b}");
+    let points = b["points"].as_array().unwrap();
+    assert_eq!(points.len() as u64, run0["impostors"].as_u64().unwrap());
+    let mut baked = 0;
+    for p in points {
+        let (e, k) = (p["estimated_bytes"].as_u64(), p["baked_bytes"].as_u64());
+        assert!(k <= e, "{p}");
+        baked += k.unwrap();
+    }
+    // Per impostor each is rounded up: the sum is the total within that.
+    let total = b["memory_bytes"].as_u64().unwrap();
+    assert!(
+        baked >= total && baked - total <= points.len() as u64,
+        "{baked} vs {total}"
+    );
+    assert!(b["layers_written"].as_u64() <= b["layers"].as_u64());
+
+    let p = dir.join("p.json");
+    let o = place(&city, &job, &p, &[]);
+    assert!(matches!(code(&o), 0 | 3), "{}", stderr(&o));
+    let rep = dir.join("bake.json");
+    let glb = dir.join("i.glb");
+    let o = run(&[
+        "bake",
+        s(&city),
+        "--placement",
+        s(&p),
+        "--job",
+        s(&job),
+        "-o",
+        s(&glb),
+        "--report",
+        s(&rep),
+    ]);
+    assert_eq!(code(&o), 0, "{}", stderr(&o));
+    let rep = read_json(&rep);
+    assert_eq!(rep["memory_bytes"], b["memory_bytes"]);
+    assert_eq!(rep["layers_written"], b["layers_written"]);
+    let html = std::fs::read_to_string(out.join("report.html")).unwrap();
+    assert!(html.contains("Estimated against baked memory: shafts"));
+}
+
 /// A memory budget of 0 places nothing: every problem view is reported
 /// unsolved, for the budget where an impostor would have helped, exit 3.
 #[test]

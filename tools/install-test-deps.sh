@@ -17,8 +17,8 @@ if ! ls /usr/lib/postgresql/*/bin/initdb >/dev/null 2>&1; then
     DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq --no-install-recommends postgresql >/dev/null
 fi
 VENV=target/test-venv
-if [ ! -x "$VENV/bin/moto_server" ]; then
+if ! "$VENV/bin/python" -c 'import moto.server' >/dev/null 2>&1; then
     echo "install-test-deps: installing moto's S3 server in $VENV" >&2
-    python3 -m venv "$VENV"
+    python3 -m venv --clear "$VENV"
     "$VENV/bin/pip" install -q --disable-pip-version-check 'moto[server]==5.2.1'
 fi

@@ -217,6 +217,7 @@ pub fn sample_report() -> crate::report::Report {
             }),
             exact: None,
             cache: None,
+            bake: None,
         }
     };
     let mut runs = Vec::new();

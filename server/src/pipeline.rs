@@ -202,8 +202,20 @@ fn run_with(
         max_memory_name: Some("the server's --job-max-memory"),
         ..PlaceOptions::default()
     };
-    let out = place(&prepared, &placement_opts, &eval, &ctl)?;
+    let mut out = place(&prepared, &placement_opts, &eval, &ctl)?;
     ctl.check()?;
+    // Baked before the report, which then shows the baked memory against
+    // the placement's estimate.
+    let glb = if opts.bake {
+        ctl.progress("bake", 0.99, "baking the impostors");
+        let glb = out.bake(&prepared, &optimizer::bake::BakeOptions::default())?;
+        // The bake does not stop part-way: a cancel during it is honoured
+        // here (and by the worker, which ends a cancelled job `cancelled`).
+        ctl.check()?;
+        Some(glb)
+    } else {
+        None
+    };
     files.write(
         "placement.json",
         optimizer::to_json_bytes(&out.place.placement)?,
@@ -212,17 +224,7 @@ fn run_with(
     let report = single_run_report("scene", &input, &job_text, &out);
     files.write("report.html", render_html(&report).into_bytes())?;
     files.write("evaluation.json", optimizer::to_json_bytes(&out.eval)?)?;
-    if opts.bake {
-        ctl.check()?;
-        ctl.progress("bake", 0.99, "baking the impostors");
-        let (glb, _) = prepared.bake(
-            &out.place.placement,
-            &optimizer::bake::BakeOptions::default(),
-            "placement",
-        )?;
-        // The bake does not stop part-way: a cancel during it is honoured
-        // here (and by the worker, which ends a cancelled job `cancelled`).
-        ctl.check()?;
+    if let Some(glb) = glb {
         files.write("impostors.glb", glb)?;
     }
     let summary = JobSummary {

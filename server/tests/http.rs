@@ -197,6 +197,14 @@ async fn summary_and_glb_jobs_succeed_with_the_cli_bytes() {
     .await;
     assert_eq!(s, 200);
     assert!(g.starts_with(b"glTF"));
+    // The baked job's report sets the baked memory against the estimate;
+    // the other's has nothing baked to show.
+    for (id, baked) in [(&id1, false), (&id2, true)] {
+        let (s, html) = request(addr, "GET", &format!("/v1/jobs/{id}/report"), None, b"").await;
+        assert_eq!(s, 200);
+        let shown = String::from_utf8_lossy(&html).contains("Estimated against baked memory");
+        assert_eq!(shown, baked, "job {id}");
+    }
 
     let (s, list) = get_json(addr, "/v1/jobs?limit=1").await;
     assert_eq!(s, 200);

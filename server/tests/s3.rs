@@ -33,14 +33,18 @@ fn wait_until(what: &str, mut ready: impl FnMut() -> bool) {
     }
 }
 
-/// moto's S3 server: the project's (`target/test-venv`) or on the `PATH`.
-fn moto_server() -> PathBuf {
-    let venv = PathBuf::from(concat!(
+/// The command that starts moto's S3 server: the project's virtual
+/// environment's Python (`target/test-venv`, still valid when the folder
+/// moves, unlike its scripts' first lines), or `moto_server` on the `PATH`.
+fn moto_server() -> Command {
+    let python = PathBuf::from(concat!(
         env!("CARGO_MANIFEST_DIR"),
-        "/../target/test-venv/bin/moto_server"
+        "/../target/test-venv/bin/python"
     ));
-    if venv.exists() {
-        return venv;
+    if python.exists() {
+        let mut c = Command::new(python);
+        c.args(["-m", "moto.server"]);
+        return c;
     }
     let on_path = Command::new("sh")
         .args(["-c", "command -v moto_server"])
@@ -53,7 +57,7 @@ fn moto_server() -> PathBuf {
         !on_path.is_empty(),
         "moto's S3 server is not installed: run tools/install-test-deps.sh"
     );
-    PathBuf::from(on_path)
+    Command::new(on_path)
 }
 
 /// The keys of the bucket's objects (a ListObjectsV2 answer's `<Key>`s).
@@ -83,7 +87,7 @@ impl Drop for Killed {
 fn job_files_live_in_an_s3_bucket() {
     let s3 = free_addr();
     let moto = Killed(
-        Command::new(moto_server())
+        moto_server()
             .args(["-H", "127.0.0.1", "-p", &s3.port().to_string()])
             .stdout(Stdio::null())
             .stderr(Stdio::null())

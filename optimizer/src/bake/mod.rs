@@ -72,6 +72,10 @@ pub struct BakeReport {
     pub placement_memory_bytes: u64,
     /// Atlas texels including gutters and unused space.
     pub atlas_texels: u64,
+    /// Per impostor of the placement, the memory of its written layers
+    /// under the job's memory model, bytes.
+    #[serde(skip)]
+    pub impostor_memory_bytes: Vec<u64>,
 }
 
 /// One rendered impostor layer: a square RGBA image on a world-space quad.
@@ -615,6 +619,13 @@ pub fn bake(
 
     let texels: u64 = layers.iter().map(|l| u64::from(l.res).pow(2)).sum();
     let mip = if memory.mipmaps { 4.0 / 3.0 } else { 1.0 };
+    let mut impostor_texels = vec![0u64; placement.impostors.len()];
+    for l in &layers {
+        if let Some(t) = impostor_texels.get_mut(l.impostor as usize) {
+            *t += u64::from(l.res).pow(2);
+        }
+    }
+    let bytes = |texels: u64| (texels as f64 * memory.bytes_per_texel * mip).ceil() as u64;
     let report = BakeReport {
         impostors: placement.impostors.len() as u64,
         layers: placement
@@ -625,12 +636,13 @@ pub fn bake(
         layers_written: layers.len() as u64,
         atlases: atlas_sizes.len() as u64,
         texels,
-        memory_bytes: (texels as f64 * memory.bytes_per_texel * mip).ceil() as u64,
+        memory_bytes: bytes(texels),
         placement_memory_bytes: placement.summary.memory_bytes,
         atlas_texels: atlas_sizes
             .iter()
             .map(|&(w, h)| u64::from(w) * u64::from(h))
             .sum(),
+        impostor_memory_bytes: impostor_texels.into_iter().map(bytes).collect(),
     };
     Ok((b.finish(), report))
 }

@@ -152,6 +152,73 @@ pub struct Run {
     /// places nothing ahead of time and has no `eval`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub cache: Option<crate::methods::hic96::PathSummary>,
+    /// The impostors as baked, against the placement's memory estimate
+    /// (runs that were baked: `impostor report --bake`, the service's
+    /// jobs with `"bake": true`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub bake: Option<BakeSummary>,
+}
+
+/// A run's impostors as baked against the placement's estimate.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize, JsonSchema)]
+pub struct BakeSummary {
+    /// Memory of the baked layers under the job's memory model, bytes.
+    pub memory_bytes: u64,
+    /// The placement's estimate, bytes.
+    pub estimated_bytes: u64,
+    /// Layers the placement asked for.
+    pub layers: u64,
+    /// Layers baked (those with at least one covered texel).
+    pub layers_written: u64,
+    /// Per impostor (the [`BakeSummary::POINTS`] largest estimates): its
+    /// estimated and its baked memory.
+    pub points: Vec<BakePoint>,
+}
+
+/// One impostor's estimated and baked memory.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize, JsonSchema)]
+pub struct BakePoint {
+    /// The placement's impostor id.
+    pub impostor: u32,
+    /// The placement's estimate, bytes.
+    pub estimated_bytes: u64,
+    /// As baked, bytes.
+    pub baked_bytes: u64,
+}
+
+impl BakeSummary {
+    /// The most impostors a summary lists.
+    pub const POINTS: usize = 2000;
+
+    /// The summary of `bake`, a bake of `placement`.
+    pub fn new(
+        placement: &crate::api::placement::Placement,
+        bake: &crate::bake::BakeReport,
+    ) -> Self {
+        let mut points: Vec<BakePoint> = placement
+            .impostors
+            .iter()
+            .enumerate()
+            .map(|(i, imp)| BakePoint {
+                impostor: i as u32,
+                estimated_bytes: imp.memory_bytes,
+                baked_bytes: bake.impostor_memory_bytes.get(i).copied().unwrap_or(0),
+            })
+            .collect();
+        points.sort_by(|a, b| {
+            b.estimated_bytes
+                .cmp(&a.estimated_bytes)
+                .then(a.impostor.cmp(&b.impostor))
+        });
+        points.truncate(Self::POINTS);
+        BakeSummary {
+            memory_bytes: bake.memory_bytes,
+            estimated_bytes: bake.placement_memory_bytes,
+            layers: bake.layers,
+            layers_written: bake.layers_written,
+            points,
+        }
+    }
 }
 
 /// The independent evaluation of one run.

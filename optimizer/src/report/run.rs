@@ -6,8 +6,8 @@ use std::time::Instant;
 use serde_json::Value;
 
 use super::{
-    EvalSummary, Machine, MethodStability, Perturbed, Report, Run, RunStatus, SceneInfo, Spread,
-    Stability, Sweep, Walkthrough,
+    BakeSummary, EvalSummary, Machine, MethodStability, Perturbed, Report, Run, RunStatus,
+    SceneInfo, Spread, Stability, Sweep, Walkthrough,
 };
 use crate::api::evaluation::Evaluation;
 use crate::api::job::{Job, Method};
@@ -31,6 +31,9 @@ pub struct ReportOptions {
     pub budgets: Vec<f64>,
     /// Views per evaluation.
     pub views: u64,
+    /// Also bake each run of the base job and its sweeps, and report its
+    /// baked memory against the placement's estimate (needs geometry).
+    pub bake: bool,
 }
 
 /// The knob that sweeps the target frame time.
@@ -208,6 +211,20 @@ pub struct RunOutput {
     pub frames: Option<PathTimes>,
 }
 
+impl RunOutput {
+    /// Bakes the placement (the scene's geometry is needed), records the
+    /// baked memory against the estimate in the run, and returns the GLB.
+    pub fn bake(
+        &mut self,
+        prepared: &Prepared,
+        opts: &crate::bake::BakeOptions,
+    ) -> Result<Vec<u8>> {
+        let (glb, report) = prepared.bake(&self.place.placement, opts, "placement")?;
+        self.run.bake = Some(BakeSummary::new(&self.place.placement, &report));
+        Ok(glb)
+    }
+}
+
 /// Places `prepared`'s job with `opts`, evaluates the placement with `eval` and, with
 /// `walk`, follows the walkthrough (the job's path, or a tour through the
 /// problem).
@@ -263,6 +280,7 @@ pub fn evaluate_placed(
         eval: Some(EvalSummary::from(&evaluation)),
         exact: out.stats.exact.clone(),
         cache: None,
+        bake: None,
     };
     Ok(RunOutput {
         place: out,
@@ -291,14 +309,15 @@ impl<'a> Preparations<'a> {
 }
 
 /// One run of a report: its placement and evaluation (and walkthrough with
-/// `walk`) without the visibility check's rays, which the report does not
-/// show.
+/// `walk`, bake with `bake`) without the visibility check's rays, which the
+/// report does not show.
 fn one_run<'a>(
     preps: &mut Preparations<'a>,
     input: &'a SceneInput,
     job: &Job,
     views: u64,
     walk: bool,
+    bake: bool,
 ) -> Result<(Run, Option<PathTimes>)> {
     let prepared = preps.for_job(input, job)?;
     if !job.method().places() {
@@ -311,13 +330,16 @@ fn one_run<'a>(
         check_rays: 0,
         check_objects: 0,
     };
-    let out = place_and_evaluate(
+    let mut out = place_and_evaluate(
         &prepared,
         &PlaceOptions::default(),
         &eval,
         walk,
         &Control::default(),
     )?;
+    if bake {
+        out.bake(&prepared, &crate::bake::BakeOptions::default())?;
+    }
     Ok((out.run, out.frames))
 }
 
@@ -456,7 +478,10 @@ pub fn run(
         })?;
         let is_target = setting.as_ref().is_some_and(|(k, _)| k == TARGET);
         let walk = is_target || (!has_target_sweep && setting.is_none());
-        let (mut run, frames) = or_failed(job, one_run(&mut preps, input, job, opts.views, walk))?;
+        let (mut run, frames) = or_failed(
+            job,
+            one_run(&mut preps, input, job, opts.views, walk, opts.bake),
+        )?;
         // (A cache's run always follows the path, for its figures; its
         // frames are charted where the other methods' are.)
         if let Some(t) = frames.filter(|_| walk) {
@@ -489,7 +514,10 @@ pub fn run(
             j.method = Some(m);
             j.memory.budget_bytes = Some(budget);
             step(&format!("{} budget {:.0} %", m.name(), f * 100.0))?;
-            let (mut run, _) = or_failed(&j, one_run(&mut preps, input, &j, opts.views, false))?;
+            let (mut run, _) = or_failed(
+                &j,
+                one_run(&mut preps, input, &j, opts.views, false, opts.bake),
+            )?;
             run.knob = Some(BUDGET.into());
             run.value = Some(budget as f64);
             runs.push(run);
@@ -520,13 +548,16 @@ pub fn run(
             };
             let views = (opts.views / 4).max(100);
             step(&format!("{} stability", m.name()))?;
-            record("base".into(), one_run(&mut preps, input, &j, views, false));
+            record(
+                "base".into(),
+                one_run(&mut preps, input, &j, views, false, false),
+            );
             for f in [0.95, 0.99, 1.01, 1.05] {
                 let mut p = j.clone();
                 p.target_frame_time_ms *= f;
                 let label = format!("target {:+.0}%", (f - 1.0) * 100.0);
                 step(&format!("{} stability: {label}", m.name()))?;
-                record(label, one_run(&mut preps, input, &p, views, false));
+                record(label, one_run(&mut preps, input, &p, views, false, false));
             }
             // The grid's planes shifted by half a cell along x and z (its
             // phase against the scene; the view space stays as it is).
@@ -537,7 +568,7 @@ pub fn run(
             step(&format!("{} stability: grid shifted", m.name()))?;
             record(
                 "grid shifted by half a cell".into(),
-                one_run(&mut preps, input, &shifted, views, false),
+                one_run(&mut preps, input, &shifted, views, false, false),
             );
             for seed in [1u64, 2] {
                 step(&format!("{} stability: objects shuffled", m.name()))?;
@@ -545,7 +576,7 @@ pub fn run(
                 let mut own = Preparations { list: Vec::new() };
                 record(
                     format!("objects shuffled (seed {seed})"),
-                    one_run(&mut own, &shuffled, &j, views, false),
+                    one_run(&mut own, &shuffled, &j, views, false, false),
                 );
             }
             let ok: Vec<&Perturbed> = settings

@@ -29,6 +29,7 @@
 //! is in the table. Memory is in MB (10⁶ bytes).
 
 mod accuracy;
+mod baked;
 mod chart;
 mod csv;
 mod exact;

@@ -141,6 +141,7 @@ impl Page<'_> {
             figure(h, &c, &esc(&cap));
         }
         self.estimate_table(h);
+        self.baked_charts(h);
         h.push_str("</section>\n");
     }
 
