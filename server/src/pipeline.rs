@@ -145,29 +145,25 @@ pub(crate) fn merge_job(
     })
 }
 
-/// Loads the job of `files`, runs `place` (which places, or merges, and
-/// evaluates) and writes the results.
-fn run_with(
-    files: JobFiles<'_>,
-    opts: &RunOptions<'_>,
-    place: impl FnOnce(&Prepared, &PlaceOptions, &EvalOptions, &Control) -> optimizer::Result<RunOutput>,
-) -> optimizer::Result<String> {
+/// A job's inputs, loaded.
+struct Loaded {
+    job_bytes: Vec<u8>,
+    job: Job,
+    input: SceneInput,
+}
+
+/// Loads the job of `files` with its scene's geometry as `geometry` asks.
+fn load(files: JobFiles<'_>, geometry: GeometryUse) -> optimizer::Result<Loaded> {
     let scene_bytes = files.read_required(SCENE)?;
     let job_bytes = files.read_required(JOB)?;
     let pvs_bytes = files.read(PVS)?;
     let job = Job::from_json(&job_bytes, "job")?;
-    // Geometry when the job needs it, for the evaluation's check of the
-    // visible sets when the scene has any, and always when baking.
     let load = Load::new(
         Source::Bytes {
             bytes: &scene_bytes,
             name: "scene",
         },
-        if opts.bake {
-            GeometryUse::Required
-        } else {
-            GeometryUse::ForChecks
-        },
+        geometry,
     )
     .with_pvs(
         pvs_bytes
@@ -175,8 +171,18 @@ fn run_with(
             .map(|bytes| Source::Bytes { bytes, name: "pvs" }),
     );
     let input = SceneInput::load(&load, &job, "job")?;
-    drop(scene_bytes);
-    let prepared = input.prepare(&job, "job")?;
+    Ok(Loaded {
+        job_bytes,
+        job,
+        input,
+    })
+}
+
+/// Calls `f` with the control of a run: `opts`' cancel flag and progress.
+fn controlled<T>(
+    opts: &RunOptions<'_>,
+    f: impl FnOnce(&Control) -> optimizer::Result<T>,
+) -> optimizer::Result<T> {
     let observer = |e: Event<'_>| {
         if let Event::Progress {
             stage, fraction, ..
@@ -189,26 +195,100 @@ fn run_with(
         cancel: Some(opts.cancel),
         observer: Some(&observer),
     };
-    // Loading a large scene takes a while: a cancel during it stops here.
-    ctl.check()?;
-    let eval = EvalOptions {
-        views: opts.eval_views,
-        cpv_views: opts.eval_views,
-        seed: 1,
-        ..EvalOptions::default()
-    };
-    let placement_opts = PlaceOptions {
+    f(&ctl)
+}
+
+/// The placement options of a run under `opts`.
+fn placement_options(opts: &RunOptions<'_>) -> PlaceOptions {
+    PlaceOptions {
         max_memory_bytes: opts.max_memory_bytes,
         max_memory_name: Some("the server's --job-max-memory"),
         ..PlaceOptions::default()
-    };
-    let mut out = place(&prepared, &placement_opts, &eval, &ctl)?;
+    }
+}
+
+/// Places the tile of a tiled job stored in `files` and writes its
+/// `placement.json` only: the merge of the tiles is evaluated, reported
+/// and baked over the whole job. Returns the JSON text of its
+/// [`JobSummary`] (its evaluation's figures 0: not evaluated).
+pub(crate) fn run_tile(files: JobFiles<'_>, opts: &RunOptions<'_>) -> optimizer::Result<String> {
+    let l = load(files, GeometryUse::WhenNeeded)?;
+    let prepared = l.input.prepare(&l.job, "job")?;
+    let out = controlled(opts, |ctl| {
+        ctl.check()?;
+        let out = prepared.place(&placement_options(opts), ctl)?;
+        ctl.check()?;
+        Ok(out)
+    })?;
+    files.write("placement.json", optimizer::to_json_bytes(&out.placement)?)?;
+    summary_text(&JobSummary {
+        placement: out.placement.summary.clone(),
+        max_ms: 0.0,
+        violations_in_solved: 0,
+        violations_in_cpv_views: 0,
+        control_violations_in_solved: 0,
+        parallax_max_px: None,
+        seconds: out.stats.seconds.clone(),
+    })
+}
+
+/// Loads the job of `files`, runs `place` (which places, or merges, and
+/// evaluates) and writes the results.
+fn run_with(
+    files: JobFiles<'_>,
+    opts: &RunOptions<'_>,
+    place: impl FnOnce(&Prepared, &PlaceOptions, &EvalOptions, &Control) -> optimizer::Result<RunOutput>,
+) -> optimizer::Result<String> {
+    // Geometry when the job needs it, for the evaluation's check of the
+    // visible sets when the scene has any, and always when baking.
+    let l = load(
+        files,
+        if opts.bake {
+            GeometryUse::Required
+        } else {
+            GeometryUse::ForChecks
+        },
+    )?;
+    let (job_bytes, input) = (&l.job_bytes, &l.input);
+    let prepared = input.prepare(&l.job, "job")?;
+    controlled(opts, |ctl| {
+        // Loading a large scene takes a while: a cancel during it stops here.
+        ctl.check()?;
+        let eval = EvalOptions {
+            views: opts.eval_views,
+            cpv_views: opts.eval_views,
+            seed: 1,
+            ..EvalOptions::default()
+        };
+        finish_run(
+            files,
+            opts,
+            &prepared,
+            input,
+            job_bytes,
+            place(&prepared, &placement_options(opts), &eval, ctl)?,
+            ctl,
+        )
+    })
+}
+
+/// Bakes (when asked), writes the results of a run and returns the JSON
+/// text of its [`JobSummary`].
+fn finish_run(
+    files: JobFiles<'_>,
+    opts: &RunOptions<'_>,
+    prepared: &Prepared,
+    input: &SceneInput,
+    job_bytes: &[u8],
+    mut out: RunOutput,
+    ctl: &Control,
+) -> optimizer::Result<String> {
     ctl.check()?;
     // Baked before the report, which then shows the baked memory against
     // the placement's estimate.
     let glb = if opts.bake {
         ctl.progress("bake", 0.99, "baking the impostors");
-        let glb = out.bake(&prepared, &optimizer::bake::BakeOptions::default())?;
+        let glb = out.bake(prepared, &optimizer::bake::BakeOptions::default())?;
         // The bake does not stop part-way: a cancel during it is honoured
         // here (and by the worker, which ends a cancelled job `cancelled`).
         ctl.check()?;
@@ -220,8 +300,8 @@ fn run_with(
         "placement.json",
         optimizer::to_json_bytes(&out.place.placement)?,
     )?;
-    let job_text: Value = serde_json::from_slice(&job_bytes).unwrap_or(Value::Null);
-    let report = single_run_report("scene", &input, &job_text, &out);
+    let job_text: Value = serde_json::from_slice(job_bytes).unwrap_or(Value::Null);
+    let report = single_run_report("scene", input, &job_text, &out);
     files.write("report.html", render_html(&report).into_bytes())?;
     files.write("evaluation.json", optimizer::to_json_bytes(&out.eval)?)?;
     if let Some(glb) = glb {
@@ -236,9 +316,13 @@ fn run_with(
         parallax_max_px: out.eval.parallax.as_ref().map(|x| x.max_px),
         seconds: out.place.stats.seconds.clone(),
     };
-    // Through a JSON value, whose keys are sorted: the stored text lists
-    // the fields in the same order as the status answer does.
-    serde_json::to_value(&summary)
+    summary_text(&summary)
+}
+
+/// The stored text of `summary`: through a JSON value, whose keys are
+/// sorted, so it lists the fields in the same order as the status answer.
+fn summary_text(summary: &JobSummary) -> optimizer::Result<String> {
+    serde_json::to_value(summary)
         .map(|v| v.to_string())
         .map_err(|e| optimizer::Error::Internal(e.to_string()))
 }

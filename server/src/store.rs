@@ -68,6 +68,27 @@ fn new_uid() -> String {
     uuid::Uuid::new_v4().to_string()
 }
 
+/// A job a worker claimed.
+pub(crate) struct Claimed {
+    pub id: i64,
+    /// Whether it bakes its impostors.
+    pub bake: bool,
+    /// What its run is.
+    pub run: Run,
+}
+
+/// What a claimed job's run is.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum Run {
+    /// A job: placed, evaluated, reported (and baked).
+    Whole,
+    /// A tile of a tiled job: placed only (the merge evaluates the whole).
+    Tile,
+    /// A tiled job whose tiles are final: their merge, evaluated, reported
+    /// (and baked).
+    Merge,
+}
+
 /// One row of the `jobs` table.
 pub(crate) struct JobRow {
     /// The internal id.
@@ -342,7 +363,7 @@ impl Store {
     /// and whether it is a tiled job's merge. On PostgreSQL, concurrent claims skip each
     /// other's rows (`FOR UPDATE SKIP LOCKED`), so no two workers take the
     /// same job.
-    pub fn claim(&self, owner: &str, lease_ms: i64) -> io::Result<Option<(i64, bool, bool)>> {
+    pub fn claim(&self, owner: &str, lease_ms: i64) -> io::Result<Option<Claimed>> {
         let now = now_ms();
         let lock = match self.backend() {
             Backend::Postgres => "FOR UPDATE SKIP LOCKED",
@@ -358,7 +379,7 @@ impl Store {
                                         AND c.state IN ({FINAL}))))
                                 OR (state = ?3 AND lease_until_ms < ?2)
                              ORDER BY id LIMIT 1 {lock})
-                 RETURNING id, bake, tiles"
+                 RETURNING id, bake, tiles, parent_id"
             ),
             &[
                 text(owner),
@@ -368,7 +389,17 @@ impl Store {
                 state(JobState::Queued),
             ],
         )?;
-        Ok(row.and_then(|r| Some((r.int(0)?, r.int(1)? != 0, r.int(2).is_some()))))
+        Ok(row.and_then(|r| {
+            Some(Claimed {
+                id: r.int(0)?,
+                bake: r.int(1)? != 0,
+                run: match (r.int(2), r.int(3)) {
+                    (Some(_), _) => Run::Merge,
+                    (None, Some(_)) => Run::Tile,
+                    (None, None) => Run::Whole,
+                },
+            })
+        }))
     }
 
     /// Renews `owner`'s lease of running job `id` for `lease_ms` more and

@@ -11,7 +11,8 @@ use std::time::Duration;
 
 use crate::AppState;
 use crate::job::{CANCELLED_BY_REQUEST, JobState};
-use crate::pipeline::{RunOptions, merge_job, run_job};
+use crate::pipeline::{RunOptions, merge_job, run_job, run_tile};
+use crate::store::Run;
 
 /// Wakes idle workers of this process when a job is submitted here; they
 /// also look at the database every [`POLL`] for jobs submitted elsewhere
@@ -216,7 +217,7 @@ fn work(st: &AppState, owner: &str) {
             }
         }
         match store.claim(owner, lease_ms) {
-            Ok(Some((id, bake, merge))) => run(st, owner, id, bake, merge),
+            Ok(Some(c)) => run(st, owner, c.id, c.bake, c.run),
             Ok(None) => seen = wakeup.wait(seen),
             Err(e) => {
                 tracing::warn!(worker = owner, "cannot claim a job: {e}");
@@ -258,7 +259,7 @@ fn keep_lease(st: &AppState, owner: &str, id: i64, stop: &Stop, ended: &mpsc::Re
 
 /// Runs job `id`, claimed by `owner`, on the calling (worker) thread and
 /// records its final state while `owner` still holds its lease.
-fn run(st: &AppState, owner: &str, id: i64, bake: bool, merge: bool) {
+fn run(st: &AppState, owner: &str, id: i64, bake: bool, kind: Run) {
     let store = &st.0.store;
     let live = &st.0.live;
     let stop = live.start(id);
@@ -294,12 +295,10 @@ fn run(st: &AppState, owner: &str, id: i64, bake: bool, merge: bool) {
         let stop = &stop;
         let keeper = s.spawn(move || keep_lease(st, owner, id, stop, &lease_watch));
         // A panic in the optimizer fails this job, not the worker.
-        let outcome = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
-            if merge {
-                merge_tiles(store, id, &opts)
-            } else {
-                run_job(files, &opts)
-            }
+        let outcome = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| match kind {
+            Run::Whole => run_job(files, &opts),
+            Run::Tile => run_tile(files, &opts),
+            Run::Merge => merge_tiles(store, id, &opts),
         }));
         drop(lease_end);
         let _ = keeper.join();

@@ -257,8 +257,24 @@ fn a_tiled_job_runs_its_tiles_on_the_workers_and_merges_them() {
     assert_eq!(list["jobs"].as_array().unwrap().len(), 1, "{list}");
     // The files are in the shared store (the job's and its four tiles'),
     // none in a process's own folder.
-    let stored = std::fs::read_dir(dir.join("artifacts")).unwrap().count();
-    assert_eq!(stored, 5);
+    let stored: Vec<_> = std::fs::read_dir(dir.join("artifacts"))
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .collect();
+    assert_eq!(stored.len(), 5);
+    // The tiles are placed only: the merge alone is evaluated and reported.
+    let evaluated = stored
+        .iter()
+        .filter(|d| d.join("evaluation.json").exists())
+        .count();
+    assert_eq!(evaluated, 1, "{stored:?}");
+    assert_eq!(
+        stored
+            .iter()
+            .filter(|d| d.join("placement.json").exists())
+            .count(),
+        5
+    );
     assert!(!dir.join("api").join("jobs").exists());
     let mut pg = postgres::Client::connect(&db, postgres::NoTls).unwrap();
     let rows = pg
