@@ -44,6 +44,12 @@ pub struct ReportArgs {
     /// scene needs geometry: a .glb or .gltf).
     #[arg(long)]
     bake: bool,
+    /// Image views per run of the base job and its sweeps (at most 10,000;
+    /// each takes about a second): the footprint mismatch of its impostors,
+    /// charted against preprocessing time beside the worst frame time (the
+    /// scene needs geometry).
+    #[arg(long, default_value_t = 0)]
+    images: u32,
     /// Output directory.
     #[arg(short, long)]
     out: PathBuf,
@@ -69,9 +75,19 @@ pub fn run(a: ReportArgs) -> Result<ExitCode> {
         .map(|s| report::run::parse_sweep(s))
         .collect::<Result<Vec<_>>>()?;
     let budgets = report::run::parse_budgets(&a.budgets)?;
+    if a.images > optimizer::evaluate::images::MAX_IMAGE_VIEWS {
+        return Err(Error::bad(
+            "--images",
+            format!(
+                "{} views is too many (at most {})",
+                a.images,
+                optimizer::evaluate::images::MAX_IMAGE_VIEWS
+            ),
+        ));
+    }
     let input = a.input.load(
         &parsed,
-        if a.bake {
+        if a.bake || a.images > 0 {
             GeometryUse::Required
         } else {
             GeometryUse::WhenNeeded
@@ -97,6 +113,7 @@ pub fn run(a: ReportArgs) -> Result<ExitCode> {
             budgets,
             views: a.views,
             bake: a.bake,
+            images: a.images,
         },
         &Control::observed(&observer),
     )?;

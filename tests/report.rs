@@ -277,6 +277,8 @@ fn the_failure_scene_leaves_problem_views_unsolved_for_every_method() {
 /// `report --bake` bakes each run and charts each impostor's baked memory
 /// against its estimate; the totals are `impostor bake`'s for the same
 /// placement, and per impostor the baked memory never exceeds the estimate.
+/// `--images` checks each run's images: the footprint mismatch is below
+/// its magenta control's, and the speed section gets its image facet.
 #[test]
 fn a_baked_report_sets_baked_memory_against_the_estimate() {
     let dir = tmp("report-bake");
@@ -293,6 +295,10 @@ fn a_baked_report_sets_baked_memory_against_the_estimate() {
         "--views",
         "200",
         "--bake",
+        "--images",
+        "6",
+        "--sweep",
+        "problem_views.cell_size=46",
         "-o",
         s(&out),
     ]);
@@ -340,6 +346,17 @@ fn a_baked_report_sets_baked_memory_against_the_estimate() {
     assert_eq!(rep["layers_written"], b["layers_written"]);
     let html = std::fs::read_to_string(out.join("report.html")).unwrap();
     assert!(html.contains("Estimated against baked memory: shafts"));
+    for run in r["runs"].as_array().unwrap() {
+        let i = &run["image"];
+        assert!(i["views"].as_u64().unwrap() > 0, "{run}");
+        let (m, c) = (
+            i["footprint_mismatch"]["mean"].as_f64().unwrap(),
+            i["control_mismatch"]["mean"].as_f64().unwrap(),
+        );
+        assert!(m < c, "the check could not have failed: {i}");
+        assert!(run["bake"].is_object(), "{run}");
+    }
+    assert!(html.contains("Image error vs preprocessing time: problem_views.cell_size"));
 }
 
 /// A memory budget of 0 places nothing: every problem view is reported
@@ -387,6 +404,7 @@ fn bad_report_arguments_are_named() {
             "target_frame_time_ms",
         ),
         (vec!["--sweep", "target_frame_time_ms"], "knob=v1"),
+        (vec!["--images", "20000"], "--images"),
     ] {
         let mut a = vec!["report", s(&city), "--job", s(&job), "-o", s(&out)];
         a.extend(args);

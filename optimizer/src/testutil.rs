@@ -218,6 +218,7 @@ pub fn sample_report() -> crate::report::Report {
             exact: None,
             cache: None,
             bake: None,
+            image: None,
         }
     };
     let mut runs = Vec::new();

@@ -157,6 +157,27 @@ pub struct Run {
     /// jobs with `"bake": true`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub bake: Option<BakeSummary>,
+    /// The image check of the run's impostors (`impostor report --images
+    /// N`): their footprint mismatch against the geometry they replace.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub image: Option<ImageSummary>,
+}
+
+/// A run's image check, as the report shows it.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize, JsonSchema)]
+pub struct ImageSummary {
+    /// Views compared (each with impostors covering at least the check's
+    /// smallest share of the image).
+    pub views: u32,
+    /// Per view, the share of its footprint pixels whose colour has no
+    /// match within one pixel in the render of the geometry: mean, 95th
+    /// percentile, largest.
+    pub footprint_mismatch: crate::api::evaluation::MismatchSpread,
+    /// The same with every layer texel magenta: where it is no larger, the
+    /// check proves nothing.
+    pub control_mismatch: crate::api::evaluation::MismatchSpread,
+    /// Share of the image covered by impostor pixels, mean over the views.
+    pub impostor_pixel_fraction: f64,
 }
 
 /// A run's impostors as baked against the placement's estimate.

@@ -6,8 +6,8 @@ use std::time::Instant;
 use serde_json::Value;
 
 use super::{
-    BakeSummary, EvalSummary, Machine, MethodStability, Perturbed, Report, Run, RunStatus,
-    SceneInfo, Spread, Stability, Sweep, Walkthrough,
+    BakeSummary, EvalSummary, ImageSummary, Machine, MethodStability, Perturbed, Report, Run,
+    RunStatus, SceneInfo, Spread, Stability, Sweep, Walkthrough,
 };
 use crate::api::evaluation::Evaluation;
 use crate::api::job::{Job, Method};
@@ -34,6 +34,9 @@ pub struct ReportOptions {
     /// Also bake each run of the base job and its sweeps, and report its
     /// baked memory against the placement's estimate (needs geometry).
     pub bake: bool,
+    /// Image views per run of the base job and its sweeps (0: none): the
+    /// footprint mismatch of its impostors (needs geometry).
+    pub images: u32,
 }
 
 /// The knob that sweeps the target frame time.
@@ -281,6 +284,7 @@ pub fn evaluate_placed(
         exact: out.stats.exact.clone(),
         cache: None,
         bake: None,
+        image: None,
     };
     Ok(RunOutput {
         place: out,
@@ -308,16 +312,42 @@ impl<'a> Preparations<'a> {
     }
 }
 
+/// What a run does besides placing and evaluating.
+#[derive(Clone, Copy, Debug)]
+struct Extras {
+    /// Bake its impostors.
+    bake: bool,
+    /// Image views of its impostors (0: none).
+    images: u32,
+}
+
+impl Extras {
+    const NONE: Extras = Extras {
+        bake: false,
+        images: 0,
+    };
+}
+
+impl ReportOptions {
+    /// The extras of the runs of the base job and its sweeps.
+    fn extras(&self) -> Extras {
+        Extras {
+            bake: self.bake,
+            images: self.images,
+        }
+    }
+}
+
 /// One run of a report: its placement and evaluation (and walkthrough with
-/// `walk`, bake with `bake`) without the visibility check's rays, which the
-/// report does not show.
+/// `walk`, bake and images as `extras` ask) without the visibility check's
+/// rays, which the report does not show.
 fn one_run<'a>(
     preps: &mut Preparations<'a>,
     input: &'a SceneInput,
     job: &Job,
     views: u64,
     walk: bool,
-    bake: bool,
+    extras: Extras,
 ) -> Result<(Run, Option<PathTimes>)> {
     let prepared = preps.for_job(input, job)?;
     if !job.method().places() {
@@ -337,8 +367,25 @@ fn one_run<'a>(
         walk,
         &Control::default(),
     )?;
-    if bake {
+    if extras.bake {
         out.bake(&prepared, &crate::bake::BakeOptions::default())?;
+    }
+    if extras.images > 0 && out.place.placement.summary.impostors > 0 {
+        let (rep, _) = prepared.image_error(
+            &out.place.placement,
+            crate::evaluate::images::LayerSource::Bake,
+            &crate::evaluate::images::ImageOptions {
+                views: extras.images,
+                ..Default::default()
+            },
+            "placement",
+        )?;
+        out.run.image = Some(ImageSummary {
+            views: rep.views,
+            footprint_mismatch: rep.footprint_mismatch_fraction,
+            control_mismatch: rep.control_mismatch_fraction,
+            impostor_pixel_fraction: rep.impostor_pixel_fraction,
+        });
     }
     Ok((out.run, out.frames))
 }
@@ -480,7 +527,7 @@ pub fn run(
         let walk = is_target || (!has_target_sweep && setting.is_none());
         let (mut run, frames) = or_failed(
             job,
-            one_run(&mut preps, input, job, opts.views, walk, opts.bake),
+            one_run(&mut preps, input, job, opts.views, walk, opts.extras()),
         )?;
         // (A cache's run always follows the path, for its figures; its
         // frames are charted where the other methods' are.)
@@ -516,7 +563,7 @@ pub fn run(
             step(&format!("{} budget {:.0} %", m.name(), f * 100.0))?;
             let (mut run, _) = or_failed(
                 &j,
-                one_run(&mut preps, input, &j, opts.views, false, opts.bake),
+                one_run(&mut preps, input, &j, opts.views, false, opts.extras()),
             )?;
             run.knob = Some(BUDGET.into());
             run.value = Some(budget as f64);
@@ -550,14 +597,17 @@ pub fn run(
             step(&format!("{} stability", m.name()))?;
             record(
                 "base".into(),
-                one_run(&mut preps, input, &j, views, false, false),
+                one_run(&mut preps, input, &j, views, false, Extras::NONE),
             );
             for f in [0.95, 0.99, 1.01, 1.05] {
                 let mut p = j.clone();
                 p.target_frame_time_ms *= f;
                 let label = format!("target {:+.0}%", (f - 1.0) * 100.0);
                 step(&format!("{} stability: {label}", m.name()))?;
-                record(label, one_run(&mut preps, input, &p, views, false, false));
+                record(
+                    label,
+                    one_run(&mut preps, input, &p, views, false, Extras::NONE),
+                );
             }
             // The grid's planes shifted by half a cell along x and z (its
             // phase against the scene; the view space stays as it is).
@@ -568,7 +618,7 @@ pub fn run(
             step(&format!("{} stability: grid shifted", m.name()))?;
             record(
                 "grid shifted by half a cell".into(),
-                one_run(&mut preps, input, &shifted, views, false, false),
+                one_run(&mut preps, input, &shifted, views, false, Extras::NONE),
             );
             for seed in [1u64, 2] {
                 step(&format!("{} stability: objects shuffled", m.name()))?;
@@ -576,7 +626,7 @@ pub fn run(
                 let mut own = Preparations { list: Vec::new() };
                 record(
                     format!("objects shuffled (seed {seed})"),
-                    one_run(&mut own, &shuffled, &j, views, false, false),
+                    one_run(&mut own, &shuffled, &j, views, false, Extras::NONE),
                 );
             }
             let ok: Vec<&Perturbed> = settings
