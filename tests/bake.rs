@@ -34,18 +34,7 @@ fn bake_validates_and_looks_like_the_geometry() {
     assert!(matches!(code(&o), 0 | 3), "{}", stderr(&o));
     let glb = dir.join("impostors.glb");
     let report = dir.join("bake.json");
-    let o = run(&[
-        "bake",
-        s(&city),
-        "--placement",
-        s(&p),
-        "--job",
-        s(&job),
-        "-o",
-        s(&glb),
-        "--report",
-        s(&report),
-    ]);
+    let o = bake(&city, &p, &job, &glb, &report);
     assert_eq!(code(&o), 0, "{}", stderr(&o));
     let rep = read_json(&report);
     let placement = read_json(&p);

@@ -328,18 +328,7 @@ fn a_baked_report_sets_baked_memory_against_the_estimate() {
     assert!(matches!(code(&o), 0 | 3), "{}", stderr(&o));
     let rep = dir.join("bake.json");
     let glb = dir.join("i.glb");
-    let o = run(&[
-        "bake",
-        s(&city),
-        "--placement",
-        s(&p),
-        "--job",
-        s(&job),
-        "-o",
-        s(&glb),
-        "--report",
-        s(&rep),
-    ]);
+    let o = bake(&city, &p, &job, &glb, &rep);
     assert_eq!(code(&o), 0, "{}", stderr(&o));
     let rep = read_json(&rep);
     assert_eq!(rep["memory_bytes"], b["memory_bytes"]);

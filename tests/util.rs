@@ -95,6 +95,22 @@ pub fn place(scene: &Path, job: &Path, out: &Path, extra: &[&str]) -> Output {
     run(&args)
 }
 
+/// Runs `impostor bake SCENE --placement P --job JOB -o GLB --report R`.
+pub fn bake(scene: &Path, placement: &Path, job: &Path, glb: &Path, report: &Path) -> Output {
+    run(&[
+        "bake",
+        s(scene),
+        "--placement",
+        s(placement),
+        "--job",
+        s(job),
+        "-o",
+        s(glb),
+        "--report",
+        s(report),
+    ])
+}
+
 /// Runs `impostor evaluate SCENE --job JOB --placement P -o OUT --views N`.
 pub fn evaluate(scene: &Path, job: &Path, placement: &Path, out: &Path, views: u32) -> Output {
     let views = views.to_string();

@@ -10,11 +10,11 @@ use std::path::PathBuf;
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
-use serde_json::{Value, json};
+use serde_json::Value;
 
 mod common;
 
-use common::process::request;
+use common::process::{request, small_job, submit_summary};
 
 const BIN: &str = env!("CARGO_BIN_EXE_impostor-server");
 
@@ -126,23 +126,9 @@ fn job_files_live_in_an_s3_bucket() {
     assert_eq!(health["artifacts"], "s3", "{health}");
 
     let glb = common::city(0.1);
-    let scene = optimizer::scene::gltf_load::load_scene_bytes(&glb, "c").unwrap();
-    let job: Value = serde_json::from_slice(
-        &std::fs::read(concat!(
-            env!("CARGO_MANIFEST_DIR"),
-            "/../fixtures/jobs/city-small.json"
-        ))
-        .unwrap(),
-    )
-    .unwrap();
+    let job = small_job();
     let expected = common::cli_placement(&glb, &serde_json::to_vec(&job).unwrap());
-    let body = json!({"scene": serde_json::to_value(scene.summary()).unwrap(), "job": job});
-    let (s, b) = request(addr, "POST", "/v1/jobs", body.to_string().as_bytes()).unwrap();
-    assert_eq!(s, 202, "{}", String::from_utf8_lossy(&b));
-    let id = serde_json::from_slice::<Value>(&b).unwrap()["id"]
-        .as_str()
-        .unwrap()
-        .to_string();
+    let id = submit_summary(addr, &glb, &job);
     wait_until("the job did not succeed", || {
         let (_, v) = request(addr, "GET", &format!("/v1/jobs/{id}"), b"").unwrap();
         let v: Value = serde_json::from_slice(&v).unwrap();

@@ -12,7 +12,7 @@ use serde_json::{Value, json};
 
 mod common;
 
-use common::process::request;
+use common::process::{request, small_job, submit_summary};
 
 const BIN: &str = env!("CARGO_BIN_EXE_impostor-server");
 
@@ -110,14 +110,7 @@ fn workers_on_postgres_finish_every_job_when_one_is_killed() {
     let glb = common::city(0.1);
     let scene = optimizer::scene::gltf_load::load_scene_bytes(&glb, "c").unwrap();
     let summary = serde_json::to_value(scene.summary()).unwrap();
-    let base: Value = serde_json::from_slice(
-        &std::fs::read(concat!(
-            env!("CARGO_MANIFEST_DIR"),
-            "/../fixtures/jobs/city-small.json"
-        ))
-        .unwrap(),
-    )
-    .unwrap();
+    let base = small_job();
     let kinds: Vec<(Vec<u8>, Vec<u8>)> = [None, Some(5.0), Some(7.0)]
         .iter()
         .map(|target| {
@@ -226,24 +219,10 @@ fn workers_on_postgres_finish_every_job_when_one_is_killed() {
 fn a_tiled_job_runs_its_tiles_on_the_workers_and_merges_them() {
     let (db, dir, addr, mut api, mut workers) = deploy("tiled", 2);
     let glb = common::city(0.1);
-    let scene = optimizer::scene::gltf_load::load_scene_bytes(&glb, "c").unwrap();
-    let mut job: Value = serde_json::from_slice(
-        &std::fs::read(concat!(
-            env!("CARGO_MANIFEST_DIR"),
-            "/../fixtures/jobs/city-small.json"
-        ))
-        .unwrap(),
-    )
-    .unwrap();
+    let mut job = small_job();
     job["partition"] = json!({"tiles": [2, 2]});
     let expected = common::cli_placement(&glb, &serde_json::to_vec(&job).unwrap());
-    let body = json!({"scene": serde_json::to_value(scene.summary()).unwrap(), "job": job});
-    let (s, b) = request(addr, "POST", "/v1/jobs", body.to_string().as_bytes()).unwrap();
-    assert_eq!(s, 202, "{}", String::from_utf8_lossy(&b));
-    let id = serde_json::from_slice::<Value>(&b).unwrap()["id"]
-        .as_str()
-        .unwrap()
-        .to_string();
+    let id = submit_summary(addr, &glb, &job);
     let status = succeeded(addr, &id, Instant::now() + Duration::from_secs(120));
     let (s, p) = request(addr, "GET", &format!("/v1/jobs/{id}/placement"), b"").unwrap();
     assert_eq!(s, 200);
@@ -304,22 +283,8 @@ fn a_tiled_job_runs_its_tiles_on_the_workers_and_merges_them() {
 fn a_stalled_worker_loses_its_job_and_records_nothing() {
     let (db, dir, addr, mut api, mut workers) = deploy("stalled", 1);
     let glb = common::city(0.1);
-    let scene = optimizer::scene::gltf_load::load_scene_bytes(&glb, "c").unwrap();
-    let job: Value = serde_json::from_slice(
-        &std::fs::read(concat!(
-            env!("CARGO_MANIFEST_DIR"),
-            "/../fixtures/jobs/city-small.json"
-        ))
-        .unwrap(),
-    )
-    .unwrap();
-    let body = json!({"scene": serde_json::to_value(scene.summary()).unwrap(), "job": job});
-    let (s, b) = request(addr, "POST", "/v1/jobs", body.to_string().as_bytes()).unwrap();
-    assert_eq!(s, 202, "{}", String::from_utf8_lossy(&b));
-    let id = serde_json::from_slice::<Value>(&b).unwrap()["id"]
-        .as_str()
-        .unwrap()
-        .to_string();
+    let job = small_job();
+    let id = submit_summary(addr, &glb, &job);
     let mut pg = postgres::Client::connect(&db, postgres::NoTls).unwrap();
     let waited = Instant::now();
     while pg

@@ -48,3 +48,31 @@ pub fn terminate(child: &mut Child, limit: Duration) -> std::process::ExitStatus
         std::thread::sleep(Duration::from_millis(50));
     }
 }
+
+/// The small city job (`fixtures/jobs/city-small.json`) as JSON.
+pub fn small_job() -> serde_json::Value {
+    serde_json::from_slice(
+        &std::fs::read(concat!(
+            env!("CARGO_MANIFEST_DIR"),
+            "/../fixtures/jobs/city-small.json"
+        ))
+        .expect("the small city job"),
+    )
+    .expect("the small city job is JSON")
+}
+
+/// Submits the summary of the GLB scene `glb` with `job` as one JSON body
+/// and returns the new job's id (the submission must be accepted).
+pub fn submit_summary(addr: SocketAddr, glb: &[u8], job: &serde_json::Value) -> String {
+    let scene = optimizer::scene::gltf_load::load_scene_bytes(glb, "scene").expect("a GLB");
+    let body = serde_json::json!({
+        "scene": serde_json::to_value(scene.summary()).expect("a summary"),
+        "job": job,
+    });
+    let (s, b) = request(addr, "POST", "/v1/jobs", body.to_string().as_bytes()).expect("request");
+    assert_eq!(s, 202, "{}", String::from_utf8_lossy(&b));
+    serde_json::from_slice::<serde_json::Value>(&b).expect("JSON")["id"]
+        .as_str()
+        .expect("an id")
+        .to_string()
+}
