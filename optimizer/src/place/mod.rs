@@ -105,7 +105,8 @@ impl Prepared<'_> {
                     "the job needs about {:.1} GB ({} problem views listing {} (problem view, cluster) pairs \
                      over a scene of {} objects), more than the {:.1} GB {}; raise \
                      target_frame_time_ms, enlarge problem_views.cell_size or min_vdi_deg, shrink the \
-                     view space, or split the scene",
+                     view space, or place it in tiles (\"partition\": {{\"tiles\": [2, 2]}} holds about \
+                     a quarter of the pairs at a time)",
                     predicted as f64 / 1e9,
                     pv.cpvs.len(),
                     counters.pairs(),
