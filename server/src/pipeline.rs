@@ -249,8 +249,7 @@ fn run_with(
             GeometryUse::ForChecks
         },
     )?;
-    let (job_bytes, input) = (&l.job_bytes, &l.input);
-    let prepared = input.prepare(&l.job, "job")?;
+    let prepared = l.input.prepare(&l.job, "job")?;
     controlled(opts, |ctl| {
         // Loading a large scene takes a while: a cancel during it stops here.
         ctl.check()?;
@@ -260,26 +259,18 @@ fn run_with(
             seed: 1,
             ..EvalOptions::default()
         };
-        finish_run(
-            files,
-            opts,
-            &prepared,
-            input,
-            job_bytes,
-            place(&prepared, &placement_options(opts), &eval, ctl)?,
-            ctl,
-        )
+        let out = place(&prepared, &placement_options(opts), &eval, ctl)?;
+        finish_run(files, opts, &prepared, &l, out, ctl)
     })
 }
 
-/// Bakes (when asked), writes the results of a run and returns the JSON
-/// text of its [`JobSummary`].
+/// Bakes (when asked), writes the results of the run of `loaded` and
+/// returns the JSON text of its [`JobSummary`].
 fn finish_run(
     files: JobFiles<'_>,
     opts: &RunOptions<'_>,
     prepared: &Prepared,
-    input: &SceneInput,
-    job_bytes: &[u8],
+    loaded: &Loaded,
     mut out: RunOutput,
     ctl: &Control,
 ) -> optimizer::Result<String> {
@@ -300,8 +291,8 @@ fn finish_run(
         "placement.json",
         optimizer::to_json_bytes(&out.place.placement)?,
     )?;
-    let job_text: Value = serde_json::from_slice(job_bytes).unwrap_or(Value::Null);
-    let report = single_run_report("scene", input, &job_text, &out);
+    let job_text: Value = serde_json::from_slice(&loaded.job_bytes).unwrap_or(Value::Null);
+    let report = single_run_report("scene", &loaded.input, &job_text, &out);
     files.write("report.html", render_html(&report).into_bytes())?;
     files.write("evaluation.json", optimizer::to_json_bytes(&out.eval)?)?;
     if let Some(glb) = glb {

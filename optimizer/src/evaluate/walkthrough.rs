@@ -317,10 +317,9 @@ impl Prepared<'_> {
         }
         let positions: Vec<DVec3> = chosen.iter().map(|r| r.1).collect();
         let worst: Vec<(f64, DVec3)> = chosen.iter().map(|r| (r.0, dir_of(r.2, r.3))).collect();
-        let stops: Vec<usize> = (0..positions.len()).collect();
-        // Nearest first from the slowest.
-        let mut tour = vec![stops[0]];
-        let mut left: Vec<usize> = stops[1..].to_vec();
+        // Nearest first from the slowest (stop 0).
+        let mut tour = vec![0];
+        let mut left: Vec<usize> = (1..positions.len()).collect();
         while !left.is_empty() {
             let here = positions[*tour.last().expect("one stop")];
             let (k, _) = left

@@ -31,11 +31,12 @@ pub struct ReportOptions {
     pub budgets: Vec<f64>,
     /// Views per evaluation.
     pub views: u64,
-    /// Also bake each run of the base job and its sweeps, and report its
-    /// baked memory against the placement's estimate (needs geometry).
+    /// Also bake each run of the base job, its sweeps and its budgets
+    /// (not the stability runs), and report its baked memory against the
+    /// placement's estimate (needs geometry).
     pub bake: bool,
-    /// Image views per run of the base job and its sweeps (0: none): the
-    /// footprint mismatch of its impostors (needs geometry).
+    /// Image views per run of the base job, its sweeps and its budgets
+    /// (0: none): the footprint mismatch of its impostors (needs geometry).
     pub images: u32,
 }
 
@@ -329,7 +330,7 @@ impl Extras {
 }
 
 impl ReportOptions {
-    /// The extras of the runs of the base job and its sweeps.
+    /// The extras of the runs of the base job, its sweeps and its budgets.
     fn extras(&self) -> Extras {
         Extras {
             bake: self.bake,
@@ -367,13 +368,24 @@ fn one_run<'a>(
         walk,
         &Control::default(),
     )?;
-    if extras.bake {
-        out.bake(&prepared, &crate::bake::BakeOptions::default())?;
-    }
+    let glb = if extras.bake {
+        Some(out.bake(&prepared, &crate::bake::BakeOptions::default())?)
+    } else {
+        None
+    };
     if extras.images > 0 && out.place.placement.summary.impostors > 0 {
+        use crate::evaluate::images::LayerSource;
+        // The layers as baked when the run was baked (not rendered again).
+        let layers = match &glb {
+            Some(bytes) => LayerSource::Glb {
+                bytes,
+                name: "the baked impostors",
+            },
+            None => LayerSource::Bake,
+        };
         let (rep, _) = prepared.image_error(
             &out.place.placement,
-            crate::evaluate::images::LayerSource::Bake,
+            layers,
             &crate::evaluate::images::ImageOptions {
                 views: extras.images,
                 ..Default::default()

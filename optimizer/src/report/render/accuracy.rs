@@ -70,6 +70,21 @@ fn pareto_front<'a>(runs: &[&'a Run], more: impl Fn(&Run) -> Option<Vec<f64>>) -
     front
 }
 
+/// Rings the runs of `front` on chart `c` at (preprocessing time, `y`),
+/// as the series `name`; nothing for an empty front.
+fn push_front(c: &mut Chart, name: &str, front: &[&Run], y: fn(&Run) -> Option<f64>) {
+    if front.is_empty() {
+        return;
+    }
+    let mut ring = Series::new(name, INK, Line::None, Marker::Ring);
+    ring.points = front
+        .iter()
+        .filter_map(|x| Some((x.seconds, y(x)?)))
+        .collect();
+    ring.guide = true;
+    c.series.push(ring);
+}
+
 impl Page<'_> {
     /// The accuracy companion of the speed chart of `knob`: worst
     /// evaluated frame time against preprocessing time, the targets, and
@@ -132,20 +147,12 @@ impl Page<'_> {
             push_nonempty(&mut c, pts);
         }
         let front = pareto_front_3(&ok);
-        let mut ring = Series::new(
+        push_front(
+            &mut c,
             "Pareto front (time, memory, worst)",
-            INK,
-            Line::None,
-            Marker::Ring,
+            &front,
+            worst_ms,
         );
-        ring.points = front
-            .iter()
-            .filter_map(|x| Some((x.seconds, worst_ms(x)?)))
-            .collect();
-        ring.guide = true;
-        if !front.is_empty() {
-            c.series.push(ring);
-        }
         let cap = format!(
             "Accuracy beside speed for the <code>{}</code> sweep: each run's largest evaluated \
              frame time (the guarantee holds where it stays at or below the run's target, dashed) \
@@ -223,20 +230,12 @@ impl Page<'_> {
             push_nonempty(&mut c, pts);
         }
         let front = pareto_front_4(&checked);
-        let mut ring = Series::new(
+        push_front(
+            &mut c,
             "Pareto front (time, memory, worst, image error)",
-            INK,
-            Line::None,
-            Marker::Ring,
+            &front,
+            image_error,
         );
-        ring.points = front
-            .iter()
-            .filter_map(|x| Some((x.seconds, image_error(x)?)))
-            .collect();
-        ring.guide = true;
-        if !front.is_empty() {
-            c.series.push(ring);
-        }
         let cap = format!(
             "Image accuracy beside speed for the <code>{}</code> sweep ({} of {} runs with \
              their images checked): per run, the mean share of its impostors' footprint \
