@@ -453,9 +453,9 @@ fn a_report_with_exact_tables_the_greedys_gap() {
     );
 }
 
-/// The seed systems side by side with shafts: `dts96` and `iboh` are
-/// placements judged by the same evaluation (no view over the target where
-/// they claim it), `hic96` a cache replayed along the walkthrough with path
+/// The seed systems side by side with shafts: `dts96`, `iboh` and `al99`
+/// are placements judged by the same evaluation (no view over the target
+/// where they claim it), `hic96` a cache replayed along the walkthrough with path
 /// figures and no evaluation; `place` refuses `hic96` naming the report.
 #[test]
 fn a_report_puts_the_seed_systems_beside_shafts() {
@@ -468,7 +468,7 @@ fn a_report_puts_the_seed_systems_beside_shafts() {
         "--job",
         s(&small_job()),
         "--methods",
-        "shafts,dts96,iboh,hic96",
+        "shafts,dts96,iboh,al99,hic96",
         "--views",
         "800",
         "-o",
@@ -478,10 +478,12 @@ fn a_report_puts_the_seed_systems_beside_shafts() {
     let r = read_json(&out.join("report.json"));
     let runs = r["runs"].as_array().unwrap();
     let of = |m: &str| runs.iter().find(|x| x["method"] == m).unwrap();
-    for m in ["shafts", "dts96", "iboh"] {
+    for m in ["shafts", "dts96", "iboh", "al99"] {
         let e = &of(m)["eval"];
         assert_eq!(e["violations_in_solved"], 0, "{m}: {e}");
         assert_eq!(e["violations_in_cpv_views"], 0, "{m}: {e}");
+        // The same views without impostors break the target.
+        assert!(e["control_violations"].as_u64().unwrap() > 0, "{m}: {e}");
     }
     // Every node of the hierarchy has its images: far more memory than
     // the shafts' selection.
