@@ -33,6 +33,20 @@ fn content_type(name: &str) -> &'static str {
     }
 }
 
+/// 404, in plain text.
+fn not_found(path: &str) -> Response {
+    (
+        StatusCode::NOT_FOUND,
+        [(
+            header::CONTENT_TYPE,
+            HeaderValue::from_static("text/plain; charset=utf-8"),
+        )],
+        format!("no such file: /{path}"),
+    )
+        .into_response()
+}
+
+/// The embedded file at `path` with its content type and `cache`.
 fn file(path: &str, cache: &'static str) -> Response {
     match WEB.get_file(path) {
         Some(f) => (
@@ -50,15 +64,7 @@ fn file(path: &str, cache: &'static str) -> Response {
             f.contents(),
         )
             .into_response(),
-        None => (
-            StatusCode::NOT_FOUND,
-            [(
-                header::CONTENT_TYPE,
-                HeaderValue::from_static("text/plain; charset=utf-8"),
-            )],
-            format!("no such file: /{path}"),
-        )
-            .into_response(),
+        None => not_found(path),
     }
 }
 
@@ -72,7 +78,7 @@ async fn index() -> Response {
 async fn asset(Path(name): Path<String>) -> Response {
     // Only the flat folder of assets: no `..`, no subfolders.
     if name.contains('/') || name.starts_with('.') {
-        return file("", "no-store");
+        return not_found(&format!("assets/{name}"));
     }
     file(
         &format!("assets/{name}"),

@@ -136,7 +136,7 @@ fn view_in(cpv: &Value) -> ([f64; 3], [f64; 3]) {
     let mid = |k: &str| (dirs[k][0].as_f64().unwrap() + dirs[k][1].as_f64().unwrap()) / 2.0;
     let axis = face / 2;
     let mut d = [0.0; 3];
-    d[axis] = if face % 2 == 0 { 1.0 } else { -1.0 };
+    d[axis] = if face.is_multiple_of(2) { 1.0 } else { -1.0 };
     let others: Vec<usize> = (0..3).filter(|&a| a != axis).collect();
     d[others[0]] = mid("u");
     d[others[1]] = mid("v");
@@ -160,11 +160,10 @@ fn the_page_submits_a_job_follows_it_and_views_its_impostors() {
     let glb = common::city(0.1);
     let scene_path = dir.join("city.glb");
     std::fs::write(&scene_path, &glb).unwrap();
-    let job_text = std::fs::read_to_string(concat!(
-        env!("CARGO_MANIFEST_DIR"),
-        "/../fixtures/jobs/city-small.json"
-    ))
-    .unwrap();
+    // The small city's job, with a short walkthrough for the viewer's walk.
+    let mut job = common::process::small_job();
+    job["walkthrough"] = json!({"points": [[20.0, 1.8, 20.0], [60.0, 1.8, 40.0]]});
+    let job_text = job.to_string();
 
     b.navigate(&format!("http://{addr}/#/submit"));
     b.wait_for(
@@ -252,7 +251,6 @@ fn the_page_submits_a_job_follows_it_and_views_its_impostors() {
         Duration::from_secs(120),
         "the viewer loading the job",
     );
-    assert_eq!(b.eval("document.getElementById('walk').disabled"), true);
     let (_, _, placement) = get(addr, &format!("/v1/jobs/{id}/placement"));
     let placement: Value = serde_json::from_slice(&placement).unwrap();
     let cpvs = placement["cpvs"].as_array().unwrap();
@@ -306,6 +304,23 @@ fn the_page_submits_a_job_follows_it_and_views_its_impostors() {
                 );
             }
         }
+    }
+
+    // "Walk the path" follows the job's walkthrough to its end.
+    b.eval("document.getElementById('walk').click(); true");
+    assert_eq!(
+        b.eval("document.getElementById('viewer').dataset.walking"),
+        "true"
+    );
+    b.wait_for(
+        "document.getElementById('viewer').dataset.walking === 'false'",
+        Duration::from_secs(120),
+        "the walk reaching the path's end",
+    );
+    let end = b.eval("impostorViewer.state().position");
+    for (a, want) in [60.0, 1.8, 40.0].iter().enumerate() {
+        let got = end[a].as_f64().unwrap();
+        assert!((got - want).abs() < 1e-6, "walk ended at {end}");
     }
 
     // The canvas shows the scene: far from all clear colour.

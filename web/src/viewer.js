@@ -6,7 +6,7 @@
 //
 // State for tests and scripts: the #viewer element's data-* attributes
 // (ready, cpv, active-impostors, hidden-objects, frame-ms,
-// frame-ms-original, visible-impostor-nodes) and window.impostorViewer.
+// frame-ms-original, visible-impostor-nodes, walking) and window.impostorViewer.
 import * as THREE from "three";
 import { GLTFLoader } from "three/examples/jsm/loaders/GLTFLoader.js";
 import { bytes, json } from "./api.js";
@@ -182,13 +182,13 @@ class Viewer {
       this.yaw -= (e.clientX - drag[0]) * 0.005;
       this.pitch = Math.max(-1.55, Math.min(1.55, this.pitch - (e.clientY - drag[1]) * 0.005));
       drag = [e.clientX, e.clientY];
-      this.walk = null;
+      if (this.walk) this.toggleWalk();
     }, opts);
   }
 
   /// Places the camera at `p` looking along `d` (stops a walk).
   lookFrom(p, d) {
-    this.walk = null;
+    if (this.walk) this.toggleWalk();
     this.pos.set(...p);
     const len = Math.hypot(...d);
     this.yaw = Math.atan2(-d[0], -d[2]);
@@ -198,17 +198,23 @@ class Viewer {
   }
 
   toggleWalk() {
-    if (this.walk) { this.walk = null; this.walkButton.textContent = "Walk the path"; return; }
+    if (this.walk) {
+      this.walk = null;
+      this.walkButton.textContent = "Walk the path";
+      this.root.dataset.walking = "false";
+      return;
+    }
     const pts = this.walkPoints.map((p) => new THREE.Vector3(...p));
     const lengths = pts.slice(1).map((p, i) => p.distanceTo(pts[i]));
     this.walk = { pts, lengths, total: lengths.reduce((a, b) => a + b, 0), s: 0 };
     this.walkButton.textContent = "Stop walking";
+    this.root.dataset.walking = "true";
   }
 
   move(dt) {
     if (this.walk) {
       const w = this.walk;
-      w.s = Math.min(w.total, w.s + dt * Math.max(5, w.total / 40));
+      w.s = Math.min(w.total, w.s + dt * Math.max(5, w.total / 30));
       let s = w.s, i = 0;
       while (i < w.lengths.length - 1 && s > w.lengths[i]) { s -= w.lengths[i]; i++; }
       const seg = w.pts[i + 1].clone().sub(w.pts[i]);
