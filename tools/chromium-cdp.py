@@ -8,7 +8,7 @@ attaches to it, then reads commands from stdin, one JSON object a line:
     {"method": "Runtime.evaluate", "params": {...}}
 
 and answers each with one line on stdout: {"result": ...} or
-{"error": ...}. Commands go to the page's session. One command of the
+{"error": ...}. Commands go to the page. One command of the
 bridge's own: {"method": "bridge.problems"} answers with the console errors
 and uncaught exceptions the page has had so far. At the end of stdin the
 browser is closed.

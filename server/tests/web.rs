@@ -17,18 +17,32 @@ mod common;
 use common::browser::Browser;
 use common::process::{request, terminate};
 
-/// Starts the binary with `--no-auth` (the default local setup) on a free
-/// loopback port over an empty data folder.
-fn spawn(name: &str) -> (Child, SocketAddr, std::path::PathBuf) {
+/// An empty folder for test `name`.
+fn fresh(name: &str) -> std::path::PathBuf {
     let dir = std::env::temp_dir().join(format!("impostor-web-{name}-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&dir);
     std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+/// Starts the binary with `--no-auth` (the default local setup) on a free
+/// loopback port over an empty data folder.
+fn spawn(name: &str) -> (Child, SocketAddr, std::path::PathBuf) {
+    let dir = fresh(name);
+    let (child, addr) = spawn_in(&dir, &["--no-auth"]);
+    (child, addr, dir)
+}
+
+/// Starts the binary with `auth` (`--no-auth` or `--tokens FILE`) on a free
+/// loopback port, its data in `dir/data`.
+fn spawn_in(dir: &std::path::Path, auth: &[&str]) -> (Child, SocketAddr) {
     let addr = std::net::TcpListener::bind("127.0.0.1:0")
         .unwrap()
         .local_addr()
         .unwrap();
     let child = Command::new(env!("CARGO_BIN_EXE_impostor-server"))
-        .args(["--no-auth", "--listen", &addr.to_string(), "--data-dir"])
+        .args(auth)
+        .args(["--listen", &addr.to_string(), "--data-dir"])
         .arg(dir.join("data"))
         .stdout(Stdio::null())
         .stderr(Stdio::null())
@@ -39,7 +53,7 @@ fn spawn(name: &str) -> (Child, SocketAddr, std::path::PathBuf) {
         assert!(start.elapsed() < Duration::from_secs(20), "no server");
         std::thread::sleep(Duration::from_millis(50));
     }
-    (child, addr, dir)
+    (child, addr)
 }
 
 /// `GET path`: status, the head's lines (lower case) and the body.
@@ -126,6 +140,51 @@ fn the_page_and_its_assets_are_served_with_their_types_and_cache_headers() {
     let _ = std::fs::remove_dir_all(dir);
 }
 
+#[test]
+fn the_page_sends_the_token_the_user_enters() {
+    let Some(mut b) = Browser::start() else {
+        return;
+    };
+    let dir = fresh("token");
+    let tokens = dir.join("tokens.json");
+    let out = Command::new(env!("CARGO_BIN_EXE_impostor-server"))
+        .args(["token", "add", "--tenant", "studio", "--tokens"])
+        .arg(&tokens)
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{out:?}");
+    let token = String::from_utf8(out.stdout).unwrap().trim().to_string();
+    let (mut child, addr) = spawn_in(&dir, &["--tokens", tokens.to_str().unwrap()]);
+    // The page itself needs no token.
+    assert_eq!(get(addr, "/").0, 200);
+    b.navigate(&format!("http://{addr}/#/"));
+    let refused = b.wait_for(
+        "document.querySelector('#main .error')?.innerText",
+        Duration::from_secs(30),
+        "the job list refused without a token",
+    );
+    assert!(refused.as_str().unwrap().contains("401"), "{refused}");
+    // The user enters the token: the list loads with it.
+    b.eval(&format!(
+        "const t = document.getElementById('token'); t.value = {}; \
+         t.dispatchEvent(new Event('change')); true",
+        serde_json::to_string(&token).unwrap()
+    ));
+    let listed = b.wait_for(
+        "document.getElementById('main').innerText.includes('No jobs yet')",
+        Duration::from_secs(30),
+        "the job list with the token",
+    );
+    assert_eq!(listed, true);
+    assert_eq!(
+        b.eval("document.querySelector('#main .error')"),
+        Value::Null
+    );
+    drop(b);
+    terminate(&mut child, Duration::from_secs(30));
+    let _ = std::fs::remove_dir_all(dir);
+}
+
 /// A view in `cpv`: its region's centre looking along its VDI's centre.
 fn view_in(cpv: &Value) -> ([f64; 3], [f64; 3]) {
     let r = &cpv["region"];
@@ -162,7 +221,7 @@ fn the_page_submits_a_job_follows_it_and_views_its_impostors() {
     std::fs::write(&scene_path, &glb).unwrap();
     // The small city's job, with a short walkthrough for the viewer's walk.
     let mut job = common::process::small_job();
-    job["walkthrough"] = json!({"points": [[20.0, 1.8, 20.0], [60.0, 1.8, 40.0]]});
+    job["walkthrough"] = json!({"points": [[20.0, 1.8, 20.0], [40.0, 1.8, 30.0]]});
     let job_text = job.to_string();
 
     b.navigate(&format!("http://{addr}/#/submit"));
@@ -318,7 +377,7 @@ fn the_page_submits_a_job_follows_it_and_views_its_impostors() {
         "the walk reaching the path's end",
     );
     let end = b.eval("impostorViewer.state().position");
-    for (a, want) in [60.0, 1.8, 40.0].iter().enumerate() {
+    for (a, want) in [40.0, 1.8, 30.0].iter().enumerate() {
         let got = end[a].as_f64().unwrap();
         assert!((got - want).abs() < 1e-6, "walk ended at {end}");
     }
@@ -330,6 +389,16 @@ fn the_page_submits_a_job_follows_it_and_views_its_impostors() {
     let total = pixels["width"].as_u64().unwrap() * pixels["height"].as_u64().unwrap();
     let drawn = pixels["drawn"].as_u64().unwrap();
     assert!(drawn * 20 > total, "only {drawn} of {total} pixels drawn");
+    // The job list shows the job.
+    b.navigate(&format!("http://{addr}/#/"));
+    let row = b.wait_for(
+        &format!(
+            "[...document.querySelectorAll('#jobs tr')].find(r => r.innerText.includes('{id}'))?.innerText"
+        ),
+        Duration::from_secs(30),
+        "the job in the list",
+    );
+    assert!(row.as_str().unwrap().contains("succeeded"), "{row}");
     let problems = b.problems();
     assert!(problems.is_empty(), "the page had errors: {problems:?}");
     drop(b);

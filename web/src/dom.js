@@ -1,4 +1,4 @@
-// Small DOM helpers shared by the pages.
+// Small DOM functions shared by the pages.
 
 /// An element: `h("td", {class: "x"}, "text", child)`.
 export function h(tag, attrs = {}, ...children) {

@@ -126,7 +126,7 @@ class Viewer {
     this.last = performance.now();
     const frame = (t) => {
       if (signal.aborted) { this.renderer.dispose(); return; }
-      this.tick(Math.min(0.1, (t - this.last) / 1000));
+      this.tick(Math.min(0.25, (t - this.last) / 1000));
       this.last = t;
       requestAnimationFrame(frame);
     };
