@@ -344,6 +344,36 @@ fn the_page_submits_a_job_follows_it_and_views_its_impostors() {
         assert_eq!(ms, cpv["time_ms_final"].as_f64().unwrap());
     }
 
+    // The view cells of the shown impostors (the camera is in `with`):
+    // shafts as cones (meshes), boxes as boxes (lines).
+    b.eval("document.querySelector('aside input[type=checkbox]').click(); true");
+    let cells = b.eval(
+        "new Promise(r => requestAnimationFrame(() => requestAnimationFrame(() => r(
+           impostorViewer.cells.children.map(c => c.isMesh ? 'shaft' : 'box')))))",
+    );
+    let mut want: Vec<&str> = with["impostors"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|i| {
+            let cell = &placement["impostors"][i.as_u64().unwrap() as usize]["view_cell"];
+            if cell.get("shaft").is_some() {
+                "shaft"
+            } else {
+                "box"
+            }
+        })
+        .collect();
+    let mut got: Vec<&str> = cells
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|c| c.as_str().unwrap())
+        .collect();
+    want.sort();
+    got.sort();
+    assert_eq!(got, want);
+
     // The viewer's object ids name the optimizer's objects: every object's
     // drawn box is the box the optimizer loaded for that id.
     let scene = optimizer::scene::gltf_load::load_scene_bytes(&glb, "city").unwrap();
