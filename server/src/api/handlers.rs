@@ -1,4 +1,4 @@
-//! The route handlers: submit, list, status, results and delete of jobs;
+//! The route handlers: submit, list, status, inputs, results and delete of jobs;
 //! health and the OpenAPI document.
 
 use axum::Json;
