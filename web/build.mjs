@@ -10,8 +10,9 @@
 // The server's build script runs it into its OUT_DIR and embeds the folder;
 // the hashed names let the server mark the assets immutable.
 import { build } from "esbuild";
+import { createHash } from "node:crypto";
 import { mkdirSync, readFileSync, writeFileSync } from "node:fs";
-import { basename, dirname, join } from "node:path";
+import { dirname, extname, join } from "node:path";
 import { fileURLToPath } from "node:url";
 
 const here = dirname(fileURLToPath(import.meta.url));
@@ -28,18 +29,23 @@ const result = await build({
   minify: true,
   target: "es2022",
   legalComments: "eof",
-  outdir: join(out, "assets"),
-  entryNames: "[name]-[hash]",
-  metafile: true,
+  outdir: "bundle",
+  write: false,
   logLevel: "warning",
 });
-const outputs = Object.keys(result.metafile.outputs).map((p) => basename(p));
-const pick = (ext) => {
-  const name = outputs.find((n) => n.endsWith(ext));
-  if (!name) throw new Error(`esbuild wrote no ${ext} file`);
-  return name;
-};
+// Named by a hash of their content alone (esbuild's [hash] also depends on
+// where the output goes), so a checkout builds the same names anywhere.
+const names = {};
+for (const file of result.outputFiles) {
+  const ext = extname(file.path);
+  const hash = createHash("sha256").update(file.contents).digest("hex").slice(0, 16);
+  names[ext] = `assets/app-${hash}${ext}`;
+  writeFileSync(join(out, names[ext]), file.contents);
+}
+for (const ext of [".js", ".css"]) {
+  if (!names[ext]) throw new Error(`esbuild wrote no ${ext} file`);
+}
 const html = readFileSync(join(here, "src", "index.html"), "utf8")
-  .replaceAll("{{app.js}}", `assets/${pick(".js")}`)
-  .replaceAll("{{app.css}}", `assets/${pick(".css")}`);
+  .replaceAll("{{app.js}}", names[".js"])
+  .replaceAll("{{app.css}}", names[".css"]);
 writeFileSync(join(out, "index.html"), html);

@@ -115,6 +115,15 @@ fn the_page_and_its_assets_are_served_with_their_types_and_cache_headers() {
             Some("public, max-age=31536000, immutable"),
             "{asset}"
         );
+        // Named by their content (so cached for good): the first 16 hex
+        // digits of its SHA-256.
+        use sha2::Digest;
+        let hash: String = sha2::Sha256::digest(&body)
+            .iter()
+            .map(|b| format!("{b:02x}"))
+            .collect();
+        let ext = asset.rsplit_once('.').unwrap().1;
+        assert_eq!(asset, format!("assets/app-{}.{ext}", &hash[..16]));
         let text = String::from_utf8(body).unwrap();
         assert!(text.contains(needle), "{asset} lacks {needle}");
         if asset.ends_with(".js") {
