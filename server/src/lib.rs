@@ -19,7 +19,8 @@
 //! Modules: `db` (the two database engines behind one interface),
 //! `artifacts` (the job files' object store), `store` (jobs and their files), `worker` (claims, leases, worker threads, live
 //! progress), `pipeline` (the calls into the optimizer),
-//! `api` (routes, handlers, bodies, the OpenAPI document), `error`
+//! `api` (routes, handlers, bodies, the OpenAPI document), `web` (the
+//! embedded web page at `/`), `error`
 //! (`ApiError`), `job` ([`JobState`]).
 
 use std::path::PathBuf;
@@ -40,6 +41,7 @@ mod error;
 mod job;
 mod pipeline;
 mod store;
+mod web;
 mod worker;
 
 pub use error::ApiError;
@@ -373,6 +375,7 @@ impl AppState {
 pub fn app(state: AppState) -> Router {
     let limit = state.0.cfg.max_upload_mb.saturating_mul(1024 * 1024);
     api::router()
+        .merge(web::router())
         .layer(middleware::from_fn_with_state(state.clone(), guard))
         .layer(DefaultBodyLimit::max(limit))
         .layer(tower_http::timeout::TimeoutLayer::with_status_code(

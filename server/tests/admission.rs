@@ -234,6 +234,8 @@ async fn tenants_see_only_their_own_jobs() {
         ("GET", format!("/v1/jobs/{id}/evaluation")),
         ("GET", format!("/v1/jobs/{id}/impostors.glb")),
         ("GET", format!("/v1/jobs/{id}/report")),
+        ("GET", format!("/v1/jobs/{id}/scene")),
+        ("GET", format!("/v1/jobs/{id}/job")),
         ("DELETE", format!("/v1/jobs/{id}")),
     ] {
         let (s, v, _) = call(addr, method, &path, Some(&b), None).await;
@@ -243,6 +245,9 @@ async fn tenants_see_only_their_own_jobs() {
     // The job is untouched, and its tenant sees it.
     let (s, v, _) = call(addr, "GET", &format!("/v1/jobs/{id}"), Some(&a), None).await;
     assert_eq!((s, v["state"].as_str()), (200, Some("queued")), "{v}");
+    let (s, v, _) = call(addr, "GET", &format!("/v1/jobs/{id}/job"), Some(&a), None).await;
+    assert_eq!(s, 200, "{v}");
+    assert!(v["view_space"].is_object(), "the job as submitted: {v}");
     let (s, v, _) = call(addr, "DELETE", &format!("/v1/jobs/{id}"), Some(&a), None).await;
     assert_eq!((s, v["state"].as_str()), (200, Some("cancelled")), "{v}");
 

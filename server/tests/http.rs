@@ -735,6 +735,8 @@ async fn openapi_documents_every_route_and_every_reference_resolves() {
         ("/v1/jobs/{id}", "get", one),
         ("/v1/jobs/{id}", "delete", one),
         ("/v1/jobs/{id}/events", "get", one),
+        ("/v1/jobs/{id}/scene", "get", one),
+        ("/v1/jobs/{id}/job", "get", one),
         ("/v1/jobs/{id}/placement", "get", results),
         ("/v1/jobs/{id}/evaluation", "get", results),
         ("/v1/jobs/{id}/impostors.glb", "get", results),
@@ -766,7 +768,7 @@ async fn openapi_documents_every_route_and_every_reference_resolves() {
     }
     assert_eq!(
         doc["paths"].as_object().unwrap().len(),
-        10,
+        12,
         "undocumented or unknown paths"
     );
 

@@ -213,3 +213,48 @@ impl OperationOutput for OpenApiJson {
         )
     }
 }
+
+/// A job's scene as it was submitted: a GLB upload, or the JSON scene
+/// summary of an inline submission (told apart by the GLB's magic).
+pub struct SceneFile(pub Vec<u8>);
+
+impl IntoResponse for SceneFile {
+    fn into_response(self) -> Response {
+        let kind = if self.0.starts_with(b"glTF") {
+            "model/gltf-binary"
+        } else {
+            "application/json"
+        };
+        with_type(kind, self.0)
+    }
+}
+
+impl OperationOutput for SceneFile {
+    type Inner = Vec<u8>;
+
+    fn inferred_responses(
+        _ctx: &mut GenContext,
+        _operation: &mut Operation,
+    ) -> Vec<(Option<StatusCode>, DocResponse)> {
+        let mut out = ok_response(
+            "the scene as submitted: the GLB upload, byte for byte",
+            "model/gltf-binary",
+            None,
+        );
+        out[0].1.description = "the scene as submitted: the GLB upload byte for byte, or the \
+                                JSON scene summary of an inline submission"
+            .into();
+        out[0].1.content.insert(
+            "application/json".into(),
+            MediaType {
+                schema: Some(SchemaObject {
+                    json_schema: schemars::json_schema!({"type": "object"}),
+                    example: None,
+                    external_docs: None,
+                }),
+                ..MediaType::default()
+            },
+        );
+        out
+    }
+}

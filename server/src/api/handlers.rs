@@ -1,4 +1,4 @@
-//! The route handlers: submit, list, status, results and delete of jobs;
+//! The route handlers: submit, list, status, inputs, results and delete of jobs;
 //! health and the OpenAPI document.
 
 use axum::Json;
@@ -12,7 +12,7 @@ use optimizer::api::placement::Placement;
 
 use axum::response::IntoResponse;
 
-use super::bodies::{EventStream, Glb, HtmlPage, MetricsText, OpenApiJson, StoredJson};
+use super::bodies::{EventStream, Glb, HtmlPage, MetricsText, OpenApiJson, SceneFile, StoredJson};
 use super::extract::{Caller, JobId, Submission};
 use super::types::{Accepted, DeleteAnswer, DeleteOutcome, Health, JobEvent, JobList, JobStatus};
 use crate::error::ApiError;
@@ -327,6 +327,45 @@ pub(crate) async fn report(
 ) -> Result<HtmlPage, ApiError> {
     Ok(HtmlPage(
         result_file(&st, &access, &id, "report.html").await?,
+    ))
+}
+
+/// Input `file` ([`store::SCENE`] or [`store::JOB`]) of the caller's job of
+/// public id `id`, in any state.
+async fn input_file(
+    st: &AppState,
+    access: &Access,
+    id: &str,
+    file: &'static str,
+) -> Result<Vec<u8>, ApiError> {
+    let row = find(st, access, id).await?;
+    match st.0.store.artifacts().get_async(row.id, file).await {
+        Ok(Some(bytes)) => Ok(bytes),
+        // Deleted between the two reads.
+        Ok(None) => Err(ApiError::no_job(id)),
+        Err(e) => Err(ApiError::internal(e)),
+    }
+}
+
+/// `GET /v1/jobs/{id}/scene`: the scene as submitted.
+pub(crate) async fn scene(
+    State(st): State<AppState>,
+    Caller(access): Caller,
+    JobId(id): JobId,
+) -> Result<SceneFile, ApiError> {
+    Ok(SceneFile(
+        input_file(&st, &access, &id, store::SCENE).await?,
+    ))
+}
+
+/// `GET /v1/jobs/{id}/job`: the job as submitted.
+pub(crate) async fn job(
+    State(st): State<AppState>,
+    Caller(access): Caller,
+    JobId(id): JobId,
+) -> Result<StoredJson<optimizer::api::job::Job>, ApiError> {
+    Ok(StoredJson::new(
+        input_file(&st, &access, &id, store::JOB).await?,
     ))
 }
 

@@ -143,6 +143,22 @@ fn routes() -> ApiRouter<AppState> {
             }),
         )
         .api_route(
+            "/v1/jobs/{id}/scene",
+            get_with(handlers::scene, |op| {
+                job_errors(op)
+                    .id("job_scene")
+                    .summary("the job's scene as submitted (the GLB upload or the scene summary)")
+            }),
+        )
+        .api_route(
+            "/v1/jobs/{id}/job",
+            get_with(handlers::job, |op| {
+                job_errors(op)
+                    .id("job_input")
+                    .summary("the job's parameters as submitted")
+            }),
+        )
+        .api_route(
             "/v1/jobs/{id}/placement",
             get_with(handlers::placement, |op| {
                 result_errors(op)

@@ -1,5 +1,7 @@
 //! Helpers shared by the integration tests.
 
+#[allow(dead_code)] // only the web page's tests
+pub mod browser;
 #[allow(dead_code)] // the restart test talks to a child process without it
 pub mod client;
 #[allow(dead_code)]

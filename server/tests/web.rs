@@ -1,0 +1,446 @@
+//! The web page at `/`: the real `impostor-server` binary serves it and its
+//! assets (types, cache headers, the bundled three.js), and headless
+//! Chromium submits a job through its form, follows the job to success and
+//! opens the 3D viewer, which must find the camera's CPV, show that CPV's
+//! impostors in place of their clusters' objects (the object order of the
+//! optimizer) and draw the scene.
+
+use std::io::{Read, Write};
+use std::net::{SocketAddr, TcpStream};
+use std::process::{Child, Command, Stdio};
+use std::time::{Duration, Instant};
+
+use serde_json::{Value, json};
+
+mod common;
+
+use common::browser::Browser;
+use common::process::{request, terminate};
+
+/// An empty folder for test `name`.
+fn fresh(name: &str) -> std::path::PathBuf {
+    let dir = std::env::temp_dir().join(format!("impostor-web-{name}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+/// Starts the binary with `--no-auth` (the default local setup) on a free
+/// loopback port over an empty data folder.
+fn spawn(name: &str) -> (Child, SocketAddr, std::path::PathBuf) {
+    let dir = fresh(name);
+    let (child, addr) = spawn_in(&dir, &["--no-auth"]);
+    (child, addr, dir)
+}
+
+/// Starts the binary with `auth` (`--no-auth` or `--tokens FILE`) on a free
+/// loopback port, its data in `dir/data`.
+fn spawn_in(dir: &std::path::Path, auth: &[&str]) -> (Child, SocketAddr) {
+    let addr = std::net::TcpListener::bind("127.0.0.1:0")
+        .unwrap()
+        .local_addr()
+        .unwrap();
+    let child = Command::new(env!("CARGO_BIN_EXE_impostor-server"))
+        .args(auth)
+        .args(["--listen", &addr.to_string(), "--data-dir"])
+        .arg(dir.join("data"))
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .spawn()
+        .expect("start impostor-server");
+    let start = Instant::now();
+    while request(addr, "GET", "/healthz", b"").is_none() {
+        assert!(start.elapsed() < Duration::from_secs(20), "no server");
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    (child, addr)
+}
+
+/// `GET path`: status, the head's lines (lower case) and the body.
+fn get(addr: SocketAddr, path: &str) -> (u16, String, Vec<u8>) {
+    let mut s = TcpStream::connect(addr).unwrap();
+    write!(
+        s,
+        "GET {path} HTTP/1.1\r\nHost: t\r\nConnection: close\r\n\r\n"
+    )
+    .unwrap();
+    let mut raw = Vec::new();
+    s.read_to_end(&mut raw).unwrap();
+    let split = raw.windows(4).position(|w| w == b"\r\n\r\n").unwrap();
+    let head = String::from_utf8_lossy(&raw[..split]).to_lowercase();
+    let status = head[9..12].parse().unwrap();
+    (status, head, raw[split + 4..].to_vec())
+}
+
+/// The value of header `name` in `head` (lower case).
+fn header<'a>(head: &'a str, name: &str) -> Option<&'a str> {
+    head.lines()
+        .find_map(|l| l.strip_prefix(&format!("{name}: ")))
+        .map(str::trim)
+}
+
+#[test]
+fn the_page_and_its_assets_are_served_with_their_types_and_cache_headers() {
+    let (mut child, addr, dir) = spawn("assets");
+    let (s, head, body) = get(addr, "/");
+    assert_eq!(s, 200);
+    assert_eq!(
+        header(&head, "content-type"),
+        Some("text/html; charset=utf-8")
+    );
+    assert_eq!(header(&head, "cache-control"), Some("no-cache"));
+    let html = String::from_utf8(body).unwrap();
+    // The index names its hashed assets; nothing comes from elsewhere.
+    let assets: Vec<&str> = html
+        .split('"')
+        .filter(|p| p.starts_with("assets/"))
+        .collect();
+    assert_eq!(assets.len(), 2, "{html}");
+    assert!(
+        !html.contains("http://") && !html.contains("https://"),
+        "{html}"
+    );
+    for asset in assets {
+        let (s, head, body) = get(addr, &format!("/{asset}"));
+        assert_eq!(s, 200, "{asset}");
+        let (kind, needle) = if asset.ends_with(".js") {
+            // three.js's renderer and the embedded job schema.
+            ("text/javascript; charset=utf-8", "WebGLRenderer")
+        } else {
+            ("text/css; charset=utf-8", "canvas")
+        };
+        assert_eq!(header(&head, "content-type"), Some(kind), "{asset}");
+        assert_eq!(
+            header(&head, "cache-control"),
+            Some("public, max-age=31536000, immutable"),
+            "{asset}"
+        );
+        // Named by their content (so cached for good): the first 16 hex
+        // digits of its SHA-256.
+        use sha2::Digest;
+        let hash: String = sha2::Sha256::digest(&body)
+            .iter()
+            .map(|b| format!("{b:02x}"))
+            .collect();
+        let ext = asset.rsplit_once('.').unwrap().1;
+        assert_eq!(asset, format!("assets/app-{}.{ext}", &hash[..16]));
+        let text = String::from_utf8(body).unwrap();
+        assert!(text.contains(needle), "{asset} lacks {needle}");
+        if asset.ends_with(".js") {
+            assert!(text.contains("target_frame_time_ms"), "the job schema");
+        }
+    }
+    // Control: an unknown asset is a 404, not the page; the API is as it was.
+    let (s, head, _) = get(addr, "/assets/app-NOSUCH.js");
+    assert_eq!(s, 404);
+    assert!(
+        header(&head, "content-type")
+            .unwrap()
+            .starts_with("text/plain")
+    );
+    assert_eq!(get(addr, "/assets/../index.html").0, 404);
+    let (s, _, body) = get(addr, "/v1/jobs");
+    assert_eq!(s, 200);
+    assert_eq!(
+        serde_json::from_slice::<Value>(&body).unwrap()["jobs"],
+        json!([])
+    );
+    terminate(&mut child, Duration::from_secs(30));
+    let _ = std::fs::remove_dir_all(dir);
+}
+
+#[test]
+fn the_page_sends_the_token_the_user_enters() {
+    let Some(mut b) = Browser::start() else {
+        return;
+    };
+    let dir = fresh("token");
+    let tokens = dir.join("tokens.json");
+    let out = Command::new(env!("CARGO_BIN_EXE_impostor-server"))
+        .args(["token", "add", "--tenant", "studio", "--tokens"])
+        .arg(&tokens)
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{out:?}");
+    let token = String::from_utf8(out.stdout).unwrap().trim().to_string();
+    let (mut child, addr) = spawn_in(&dir, &["--tokens", tokens.to_str().unwrap()]);
+    // The page itself needs no token.
+    assert_eq!(get(addr, "/").0, 200);
+    b.navigate(&format!("http://{addr}/#/"));
+    let refused = b.wait_for(
+        "document.querySelector('#main .error')?.innerText",
+        Duration::from_secs(30),
+        "the job list refused without a token",
+    );
+    assert!(refused.as_str().unwrap().contains("401"), "{refused}");
+    // The user enters the token: the list loads with it.
+    b.eval(&format!(
+        "const t = document.getElementById('token'); t.value = {}; \
+         t.dispatchEvent(new Event('change')); true",
+        serde_json::to_string(&token).unwrap()
+    ));
+    let listed = b.wait_for(
+        "document.getElementById('main').innerText.includes('No jobs yet')",
+        Duration::from_secs(30),
+        "the job list with the token",
+    );
+    assert_eq!(listed, true);
+    assert_eq!(
+        b.eval("document.querySelector('#main .error')"),
+        Value::Null
+    );
+    drop(b);
+    terminate(&mut child, Duration::from_secs(30));
+    let _ = std::fs::remove_dir_all(dir);
+}
+
+/// A view in `cpv`: its region's centre looking along its VDI's centre.
+fn view_in(cpv: &Value) -> ([f64; 3], [f64; 3]) {
+    let r = &cpv["region"];
+    let p =
+        [0, 1, 2].map(|a| (r["min"][a].as_f64().unwrap() + r["max"][a].as_f64().unwrap()) / 2.0);
+    let dirs = &cpv["directions"];
+    let face = dirs["face"].as_u64().unwrap() as usize;
+    let mid = |k: &str| (dirs[k][0].as_f64().unwrap() + dirs[k][1].as_f64().unwrap()) / 2.0;
+    let axis = face / 2;
+    let mut d = [0.0; 3];
+    d[axis] = if face.is_multiple_of(2) { 1.0 } else { -1.0 };
+    let others: Vec<usize> = (0..3).filter(|&a| a != axis).collect();
+    d[others[0]] = mid("u");
+    d[others[1]] = mid("v");
+    (p, d)
+}
+
+/// Ids as the viewer lists them: ascending, comma-separated.
+fn id_list(ids: impl IntoIterator<Item = u64>) -> String {
+    let mut v: Vec<u64> = ids.into_iter().collect();
+    v.sort();
+    v.dedup();
+    v.iter().map(u64::to_string).collect::<Vec<_>>().join(",")
+}
+
+#[test]
+fn the_page_submits_a_job_follows_it_and_views_its_impostors() {
+    let Some(mut b) = Browser::start() else {
+        return;
+    };
+    let (mut child, addr, dir) = spawn("browser");
+    let glb = common::city(0.1);
+    let scene_path = dir.join("city.glb");
+    std::fs::write(&scene_path, &glb).unwrap();
+    // The small city's job, with a short walkthrough for the viewer's walk.
+    let mut job = common::process::small_job();
+    job["walkthrough"] = json!({"points": [[20.0, 1.8, 20.0], [40.0, 1.8, 30.0]]});
+    let job_text = job.to_string();
+
+    b.navigate(&format!("http://{addr}/#/submit"));
+    b.wait_for(
+        "!!document.getElementById('scene')",
+        Duration::from_secs(30),
+        "the submit form",
+    );
+    // Control: a job the schema refuses is not sent.
+    b.eval(
+        "document.getElementById('job').value = '{\"target_frame_time_ms\": \"fast\"}';
+         document.getElementById('submit').click(); true",
+    );
+    let refused = b.wait_for(
+        "document.getElementById('submit-result').innerText",
+        Duration::from_secs(10),
+        "the schema's errors",
+    );
+    let refused = refused.as_str().unwrap();
+    assert!(
+        refused.contains("does not match the job schema"),
+        "{refused}"
+    );
+    assert!(refused.contains("view_space"), "{refused}");
+    assert!(refused.contains("/target_frame_time_ms"), "{refused}");
+    let (_, _, list) = get(addr, "/v1/jobs");
+    assert_eq!(
+        serde_json::from_slice::<Value>(&list).unwrap()["jobs"],
+        json!([])
+    );
+
+    // The real submission: scene file, job JSON, bake (checked by default).
+    let root = b.call("DOM.getDocument", json!({})).unwrap()["root"]["nodeId"].clone();
+    let input = b
+        .call(
+            "DOM.querySelector",
+            json!({"nodeId": root, "selector": "#scene"}),
+        )
+        .unwrap()["nodeId"]
+        .clone();
+    b.call(
+        "DOM.setFileInputFiles",
+        json!({"nodeId": input, "files": [scene_path.to_str().unwrap()]}),
+    )
+    .unwrap();
+    b.eval(&format!(
+        "document.getElementById('job').value = {}; document.getElementById('submit').click(); true",
+        serde_json::to_string(&job_text).unwrap()
+    ));
+    let state = b.wait_for(
+        "(() => { const p = document.getElementById('job-page');
+                  return p && p.dataset.ready === 'true' && p.dataset.state; })()",
+        Duration::from_secs(600),
+        "the job page showing a finished job",
+    );
+    assert_eq!(state, "succeeded");
+    let id = b.eval("document.getElementById('job-page').dataset.job");
+    let id = id.as_str().unwrap().to_string();
+    let (s, _, status) = get(addr, &format!("/v1/jobs/{id}"));
+    assert_eq!(s, 200);
+    let status: Value = serde_json::from_slice(&status).unwrap();
+    assert_eq!(status["state"], "succeeded");
+    assert_eq!(status["bake"], true);
+    // The page shows the summary, the report and the downloads.
+    let cpvs = b.eval(
+        "[...document.querySelectorAll('#job-summary tr')].find(r => r.cells[0].innerText === 'cpvs')?.cells[1].innerText",
+    );
+    assert_eq!(cpvs, json!(status["summary"]["cpvs"].to_string()));
+    let files = b.eval("[...document.querySelectorAll('[data-file]')].map(a => a.dataset.file)");
+    assert!(
+        files.as_array().unwrap().contains(&json!("impostors.glb")),
+        "{files}"
+    );
+    // The scene input is served as it was uploaded.
+    let (s, head, scene) = get(addr, &format!("/v1/jobs/{id}/scene"));
+    assert_eq!(s, 200);
+    assert_eq!(header(&head, "content-type"), Some("model/gltf-binary"));
+    assert!(scene == glb, "the scene differs from the upload");
+
+    // The viewer.
+    b.eval("document.getElementById('open-viewer').click(); true");
+    b.wait_for(
+        "(() => { const v = document.getElementById('viewer');
+                  if (v && v.dataset.error) throw new Error(v.dataset.error);
+                  return v && v.dataset.ready === 'true'; })()",
+        Duration::from_secs(120),
+        "the viewer loading the job",
+    );
+    let (_, _, placement) = get(addr, &format!("/v1/jobs/{id}/placement"));
+    let placement: Value = serde_json::from_slice(&placement).unwrap();
+    let cpvs = placement["cpvs"].as_array().unwrap();
+    let with = cpvs
+        .iter()
+        .find(|c| !c["impostors"].as_array().unwrap().is_empty())
+        .expect("the small city has a CPV with impostors");
+    let other = cpvs
+        .iter()
+        .find(|c| c["impostors"] != with["impostors"])
+        .expect("a CPV with other impostors");
+    for cpv in [with, other, with] {
+        let (p, d) = view_in(cpv);
+        let state = b.eval(&format!("impostorViewer.lookFrom({p:?}, {d:?})"));
+        let active = cpv["impostors"].as_array().unwrap();
+        let hidden = active.iter().flat_map(|i| {
+            placement["impostors"][i.as_u64().unwrap() as usize]["objects"]
+                .as_array()
+                .unwrap()
+                .iter()
+                .map(|o| o.as_u64().unwrap())
+        });
+        assert_eq!(state["cpv"], cpv["id"].to_string(), "{state}");
+        assert_eq!(
+            state["activeImpostors"],
+            id_list(active.iter().map(|i| i.as_u64().unwrap())),
+            "{state}"
+        );
+        assert_eq!(state["hiddenObjects"], id_list(hidden), "{state}");
+        assert_eq!(state["visibleImpostorNodes"], active.len().to_string());
+        let ms: f64 = state["frameMs"].as_str().unwrap().parse().unwrap();
+        assert_eq!(ms, cpv["time_ms_final"].as_f64().unwrap());
+    }
+
+    // The view cells of the shown impostors (the camera is in `with`):
+    // shafts as cones (meshes), boxes as boxes (lines).
+    b.eval("document.querySelector('aside input[type=checkbox]').click(); true");
+    let cells = b.eval(
+        "new Promise(r => requestAnimationFrame(() => requestAnimationFrame(() => r(
+           impostorViewer.cells.children.map(c => c.isMesh ? 'shaft' : 'box')))))",
+    );
+    let mut want: Vec<&str> = with["impostors"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|i| {
+            let cell = &placement["impostors"][i.as_u64().unwrap() as usize]["view_cell"];
+            if cell.get("shaft").is_some() {
+                "shaft"
+            } else {
+                "box"
+            }
+        })
+        .collect();
+    let mut got: Vec<&str> = cells
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|c| c.as_str().unwrap())
+        .collect();
+    want.sort();
+    got.sort();
+    assert_eq!(got, want);
+
+    // The viewer's object ids name the optimizer's objects: every object's
+    // drawn box is the box the optimizer loaded for that id.
+    let scene = optimizer::scene::gltf_load::load_scene_bytes(&glb, "city").unwrap();
+    let boxes = b.eval("impostorViewer.objectMeshes.map((_, i) => impostorViewer.objectBox(i))");
+    let boxes = boxes.as_array().unwrap();
+    assert_eq!(boxes.len(), scene.objects.len());
+    for (i, (b, o)) in boxes.iter().zip(&scene.objects).enumerate() {
+        for (k, want) in [("min", o.min), ("max", o.max)] {
+            for a in 0..3 {
+                let got = b[k][a]
+                    .as_f64()
+                    .unwrap_or_else(|| panic!("object {i}: the viewer has no mesh for it ({b})"));
+                assert!(
+                    (got - want[a]).abs() < 1e-3 * (1.0 + want[a].abs()),
+                    "object {i} {k}[{a}]: the viewer's {got}, the optimizer's {}",
+                    want[a]
+                );
+            }
+        }
+    }
+
+    // "Walk the path" follows the job's walkthrough to its end.
+    b.eval("document.getElementById('walk').click(); true");
+    assert_eq!(
+        b.eval("document.getElementById('viewer').dataset.walking"),
+        "true"
+    );
+    b.wait_for(
+        "document.getElementById('viewer').dataset.walking === 'false'",
+        Duration::from_secs(120),
+        "the walk reaching the path's end",
+    );
+    let end = b.eval("impostorViewer.state().position");
+    for (a, want) in [40.0, 1.8, 30.0].iter().enumerate() {
+        let got = end[a].as_f64().unwrap();
+        assert!((got - want).abs() < 1e-6, "walk ended at {end}");
+    }
+
+    // The canvas shows the scene: far from all clear colour.
+    let pixels = b.eval(
+        "new Promise(r => requestAnimationFrame(() => requestAnimationFrame(() => r(impostorViewer.pixels()))))",
+    );
+    let total = pixels["width"].as_u64().unwrap() * pixels["height"].as_u64().unwrap();
+    let drawn = pixels["drawn"].as_u64().unwrap();
+    assert!(drawn * 20 > total, "only {drawn} of {total} pixels drawn");
+    // The job list shows the job.
+    b.navigate(&format!("http://{addr}/#/"));
+    let row = b.wait_for(
+        &format!(
+            "[...document.querySelectorAll('#jobs tr')].find(r => r.innerText.includes('{id}'))?.innerText"
+        ),
+        Duration::from_secs(30),
+        "the job in the list",
+    );
+    assert!(row.as_str().unwrap().contains("succeeded"), "{row}");
+    let problems = b.problems();
+    assert!(problems.is_empty(), "the page had errors: {problems:?}");
+    drop(b);
+    terminate(&mut child, Duration::from_secs(30));
+    let _ = std::fs::remove_dir_all(dir);
+}

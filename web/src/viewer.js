@@ -1,0 +1,326 @@
+// The 3D viewer of a finished, baked job: the scene as submitted and the
+// baked impostors, flown through with WASD + mouse (or along the job's
+// walkthrough path). Each frame it finds the camera's CPV in the placement,
+// shows that CPV's impostors in place of their clusters' objects and plots
+// the CPV's estimated frame time with and without impostors.
+//
+// State for tests and scripts: the #viewer element's data-* attributes
+// (ready, cpv, active-impostors, hidden-objects, frame-ms,
+// frame-ms-original, visible-impostor-nodes, walking) and window.impostorViewer.
+import * as THREE from "three";
+import { GLTFLoader } from "three/examples/jsm/loaders/GLTFLoader.js";
+import { bytes, json } from "./api.js";
+import { FrameChart } from "./chart.js";
+import { findCpv } from "./cpv.js";
+import { errorBox, h } from "./dom.js";
+import { glbJson, objectNodes } from "./objects.js";
+import { regionLines, viewCell, boxLines } from "./overlays.js";
+
+/// Scenes over this many triangles get a note: the browser may be slow.
+const LARGE_TRIANGLES = 5_000_000;
+/// Meshes on this layer are not drawn (the camera sees layer 0 only);
+/// layers are not inherited, so hiding a node's meshes leaves its children.
+const HIDDEN = 1;
+
+export async function viewerPage(main, id, signal) {
+  const root = h("section", { id: "viewer", class: "viewer-page" });
+  main.append(h("h1", {}, "Viewer of job ", h("a", { href: `#/jobs/${id}` }, h("code", {}, id))), root);
+  const status = h("p", {}, "Loading the scene, the impostors and the placement…");
+  root.append(status);
+  let data;
+  try {
+    data = await load(id);
+  } catch (e) {
+    status.replaceWith(errorBox(e));
+    root.dataset.error = String(e.message || e);
+    return;
+  }
+  if (signal.aborted) return;
+  status.remove();
+  const viewer = new Viewer(root, data, signal);
+  window.impostorViewer = viewer;
+  root.dataset.ready = "true";
+}
+
+async function load(id) {
+  const job = await json(`/v1/jobs/${id}`);
+  if (job.state !== "succeeded") throw new Error(`job ${id} is ${job.state}: the viewer needs a finished job`);
+  if (!job.bake) throw new Error(`job ${id} was not baked: submit it with “bake” to view its impostors`);
+  const [params, placement, sceneBytes, impostorBytes] = await Promise.all([
+    json(`/v1/jobs/${id}/job`),
+    json(`/v1/jobs/${id}/placement`),
+    bytes(`/v1/jobs/${id}/scene`),
+    bytes(`/v1/jobs/${id}/impostors.glb`),
+  ]);
+  const loader = new GLTFLoader();
+  const [scene, impostors] = await Promise.all([
+    loader.parseAsync(sceneBytes, ""),
+    loader.parseAsync(impostorBytes, ""),
+  ]);
+  const sceneJson = glbJson(sceneBytes);
+  const nodeObjects = await Promise.all(
+    (sceneJson.nodes || []).map((_, i) => scene.parser.getDependency("node", i)));
+  return { params, placement, scene, sceneJson, nodeObjects, impostors };
+}
+
+class Viewer {
+  constructor(root, { params, placement, scene, sceneJson, nodeObjects, impostors }, signal) {
+    this.root = root;
+    this.placement = placement;
+    this.vs = params.view_space;
+    this.target = placement.summary.target_frame_time_ms;
+    this.walkPoints = params.walkthrough ? params.walkthrough.points : null;
+
+    this.canvas = h("canvas", { class: "scene", width: 960, height: 600, tabindex: 0 });
+    const chartCanvas = h("canvas", { width: 380, height: 200, id: "frame-chart" });
+    this.info = h("div", { id: "viewer-info" });
+    const toggle = (label, fn) => h("label", {}, h("input", { type: "checkbox", onchange: (e) => fn(e.target.checked) }), ` ${label}`, h("br"));
+    this.walkButton = h("button", { id: "walk", disabled: !this.walkPoints, onclick: () => this.toggleWalk() },
+      this.walkPoints ? "Walk the path" : "no walkthrough path in the job");
+    const aside = h("aside", {},
+      h("p", {}, "Fly: W A S D, R/F up and down, drag the mouse to look; shift: faster."),
+      h("p", {}, this.walkButton),
+      toggle("view cells of the shown impostors", (on) => { this.showCells = on; this.cellsFor = null; }),
+      toggle("CPV regions", (on) => { this.regions.visible = on; this.cpvBox.visible = on; }),
+      h("h3", {}, "Estimated frame time of the camera's CPV"), chartCanvas, this.info);
+    const layout = h("div", { class: "viewer" }, this.canvas, aside);
+    root.append(layout);
+    this.chart = new FrameChart(chartCanvas);
+
+    this.renderer = new THREE.WebGLRenderer({ canvas: this.canvas, antialias: true, preserveDrawingBuffer: true });
+    this.renderer.setClearColor(0xb0bec5);
+    this.three = new THREE.Scene();
+    this.three.add(new THREE.HemisphereLight(0xffffff, 0x555555, 2.5));
+    const sun = new THREE.DirectionalLight(0xffffff, 1.5);
+    sun.position.set(1, 2, 1.5);
+    this.three.add(sun);
+    this.three.add(scene.scene, impostors.scene);
+
+    this.mapScene(scene, sceneJson, nodeObjects);
+    this.mapImpostors(impostors);
+    this.cells = new THREE.Group();
+    this.three.add(this.cells);
+    this.regions = regionLines(placement.cpvs.map((c) => c.region), 0x6a1b9a);
+    this.regions.visible = false;
+    this.three.add(this.regions);
+    this.cpvBox = new THREE.Group();
+    this.cpvBox.visible = false;
+    this.three.add(this.cpvBox);
+
+    const fov = params.camera && params.camera.fov_deg ? params.camera.fov_deg : 45;
+    this.camera = new THREE.PerspectiveCamera(fov, 960 / 600, 0.1, 20000);
+    this.camera.layers.set(0);
+    const [min, max] = [this.vs.min, this.vs.max];
+    this.size = Math.hypot(max[0] - min[0], max[1] - min[1], max[2] - min[2]);
+    this.pos = new THREE.Vector3((min[0] + max[0]) / 2, (min[1] + max[1]) / 2, (min[2] + max[2]) / 2);
+    this.yaw = 0;
+    this.pitch = 0;
+    this.keys = new Set();
+    this.walk = null;
+    this.cpv = undefined;
+    this.bindInput(signal);
+    if (this.triangles > LARGE_TRIANGLES) {
+      root.prepend(h("p", { class: "note" }, `The scene has ${this.triangles.toLocaleString()} triangles: ` +
+        "the browser may draw it slowly (the placement does not depend on it)."));
+    }
+    this.last = performance.now();
+    const frame = (t) => {
+      if (signal.aborted) { this.renderer.dispose(); return; }
+      this.tick(Math.min(0.25, (t - this.last) / 1000));
+      this.last = t;
+      requestAnimationFrame(frame);
+    };
+    requestAnimationFrame(frame);
+  }
+
+  /// The meshes of each object id (own meshes of its node: not those of
+  /// child nodes, which are objects of their own). `nodeObjects`: the
+  /// three.js object of each glTF node (the loader's node cache; its
+  /// associations are shared between the instances of a mesh).
+  mapScene(gltf, sceneJson, nodeObjects) {
+    const { objects, levels } = objectNodes(sceneJson);
+    const isNode = new Set(nodeObjects);
+    const own = (o) => {
+      const out = o.isMesh ? [o] : [];
+      for (const c of o.children) if (c.isMesh && !isNode.has(c)) out.push(c);
+      return out;
+    };
+    this.objectMeshes = objects.map((n) => own(nodeObjects[n]));
+    // Coarser levels of detail are not drawn: objects show their own level.
+    for (const n of levels) nodeObjects[n].visible = false;
+    this.triangles = 0;
+    gltf.scene.traverse((o) => {
+      if (o.isMesh && o.geometry) {
+        const g = o.geometry;
+        this.triangles += (g.index ? g.index.count : g.attributes.position.count) / 3;
+      }
+    });
+  }
+
+  /// The nodes of each impostor id (`extras.impostor` of the baked GLB).
+  mapImpostors(gltf) {
+    this.impostorNodes = new Map();
+    gltf.scene.traverse((o) => {
+      const id = o.userData && o.userData.impostor;
+      if (id === undefined) return;
+      if (!this.impostorNodes.has(id)) this.impostorNodes.set(id, []);
+      this.impostorNodes.get(id).push(o);
+      o.visible = false;
+    });
+  }
+
+  bindInput(signal) {
+    const opts = { signal };
+    this.canvas.addEventListener("keydown", (e) => { this.keys.add(e.key.toLowerCase()); e.preventDefault(); }, opts);
+    this.canvas.addEventListener("keyup", (e) => this.keys.delete(e.key.toLowerCase()), opts);
+    this.canvas.addEventListener("blur", () => this.keys.clear(), opts);
+    let drag = null;
+    this.canvas.addEventListener("mousedown", (e) => { drag = [e.clientX, e.clientY]; this.canvas.focus(); }, opts);
+    window.addEventListener("mouseup", () => { drag = null; }, opts);
+    window.addEventListener("mousemove", (e) => {
+      if (!drag) return;
+      this.yaw -= (e.clientX - drag[0]) * 0.005;
+      this.pitch = Math.max(-1.55, Math.min(1.55, this.pitch - (e.clientY - drag[1]) * 0.005));
+      drag = [e.clientX, e.clientY];
+      if (this.walk) this.toggleWalk();
+    }, opts);
+  }
+
+  /// Places the camera at `p` looking along `d` (stops a walk).
+  lookFrom(p, d) {
+    if (this.walk) this.toggleWalk();
+    this.pos.set(...p);
+    const len = Math.hypot(...d);
+    this.yaw = Math.atan2(-d[0], -d[2]);
+    this.pitch = Math.asin(Math.max(-1, Math.min(1, d[1] / len)));
+    this.tick(0);
+    return this.state();
+  }
+
+  toggleWalk() {
+    if (this.walk) {
+      this.walk = null;
+      this.walkButton.textContent = "Walk the path";
+      this.root.dataset.walking = "false";
+      return;
+    }
+    const pts = this.walkPoints.map((p) => new THREE.Vector3(...p));
+    const lengths = pts.slice(1).map((p, i) => p.distanceTo(pts[i]));
+    this.walk = { pts, lengths, total: lengths.reduce((a, b) => a + b, 0), s: 0 };
+    this.walkButton.textContent = "Stop walking";
+    this.root.dataset.walking = "true";
+  }
+
+  move(dt) {
+    if (this.walk) {
+      const w = this.walk;
+      w.s = Math.min(w.total, w.s + dt * Math.max(5, w.total / 30));
+      let s = w.s, i = 0;
+      while (i < w.lengths.length - 1 && s > w.lengths[i]) { s -= w.lengths[i]; i++; }
+      const seg = w.pts[i + 1].clone().sub(w.pts[i]);
+      this.pos.copy(w.pts[i]).addScaledVector(seg, w.lengths[i] > 0 ? s / w.lengths[i] : 0);
+      if (w.lengths[i] > 0) {
+        seg.normalize();
+        this.yaw = Math.atan2(-seg.x, -seg.z);
+        this.pitch = Math.asin(seg.y);
+      }
+      if (w.s >= w.total) this.toggleWalk();
+      return;
+    }
+    const speed = (this.keys.has("shift") ? 0.25 : 0.06) * this.size * dt;
+    const fwd = new THREE.Vector3(-Math.sin(this.yaw), 0, -Math.cos(this.yaw));
+    const right = new THREE.Vector3(-fwd.z, 0, fwd.x);
+    const k = (c) => (this.keys.has(c) ? 1 : 0);
+    this.pos.addScaledVector(fwd, (k("w") - k("s")) * speed);
+    this.pos.addScaledVector(right, (k("d") - k("a")) * speed);
+    this.pos.y += (k("r") - k("f")) * speed;
+    // The camera stays in the job's view space.
+    for (const [a, c] of ["x", "y", "z"].entries()) {
+      this.pos[c] = Math.max(this.vs.min[a], Math.min(this.vs.max[a], this.pos[c]));
+    }
+  }
+
+  tick(dt) {
+    this.move(dt);
+    this.camera.position.copy(this.pos);
+    this.camera.rotation.set(this.pitch, this.yaw, 0, "YXZ");
+    this.camera.updateMatrixWorld();
+    const d = new THREE.Vector3();
+    this.camera.getWorldDirection(d);
+    const cpv = findCpv(this.placement.cpvs, this.vs.max, this.pos.toArray(), d.toArray());
+    if (cpv !== this.cpv) this.switchCpv(cpv);
+    if (this.showCells && this.cellsFor !== this.cpv) this.drawCells();
+    if (!this.showCells && this.cells.children.length) this.cells.clear();
+    this.chart.push(cpv ? cpv.time_ms_original : null, cpv ? cpv.time_ms_final : null, this.target);
+    this.renderer.render(this.three, this.camera);
+  }
+
+  /// Shows `cpv`'s impostors and hides the objects of their clusters.
+  switchCpv(cpv) {
+    this.cpv = cpv;
+    const active = cpv ? [...cpv.impostors].sort((a, b) => a - b) : [];
+    const hidden = new Set();
+    for (const i of active) for (const o of this.placement.impostors[i].objects) hidden.add(o);
+    this.objectMeshes.forEach((meshes, id) => {
+      for (const m of meshes) m.layers.set(hidden.has(id) ? HIDDEN : 0);
+    });
+    let shown = 0;
+    const on = new Set(active);
+    for (const [id, nodes] of this.impostorNodes) {
+      for (const n of nodes) {
+        n.visible = on.has(id);
+        if (n.visible) shown++;
+      }
+    }
+    this.cpvBox.clear();
+    if (cpv) this.cpvBox.add(boxLines(cpv.region.min, cpv.region.max, 0xff6f00));
+    const ds = this.root.dataset;
+    ds.cpv = cpv ? String(cpv.id) : "";
+    ds.activeImpostors = active.join(",");
+    ds.hiddenObjects = [...hidden].sort((a, b) => a - b).join(",");
+    ds.visibleImpostorNodes = String(shown);
+    ds.frameMs = cpv ? String(cpv.time_ms_final) : "";
+    ds.frameMsOriginal = cpv ? String(cpv.time_ms_original) : "";
+    this.info.replaceChildren(cpv
+      ? h("p", {}, `CPV ${cpv.id}: ${cpv.time_ms_original.toFixed(2)} ms without impostors, ` +
+        `${cpv.time_ms_final.toFixed(2)} ms with ${active.length} impostor(s) ` +
+        `(${hidden.size} objects replaced)${cpv.solved ? "" : `; unsolved: ${cpv.unsolved_reason}`}.`)
+      : h("p", {}, "No CPV here: the view was proven within the target without impostors."));
+  }
+
+  drawCells() {
+    this.cells.clear();
+    for (const i of this.cpv ? this.cpv.impostors : []) {
+      this.cells.add(viewCell(this.placement.impostors[i].view_cell, this.size, 0x00897b));
+    }
+    this.cellsFor = this.cpv;
+  }
+
+  state() {
+    return { ...this.root.dataset, position: this.pos.toArray() };
+  }
+
+  /// The world box of object `id`'s meshes: their local boxes' transformed
+  /// corners, as the optimizer bounds an object (for checking the object
+  /// order against the optimizer's).
+  objectBox(id) {
+    const box = new THREE.Box3();
+    for (const m of this.objectMeshes[id] || []) box.expandByObject(m, false);
+    return { min: box.min.toArray(), max: box.max.toArray() };
+  }
+
+  /// How many of the canvas's pixels are not the clear colour.
+  pixels() {
+    const gl = this.renderer.getContext();
+    const w = gl.drawingBufferWidth, hgt = gl.drawingBufferHeight;
+    const px = new Uint8Array(w * hgt * 4);
+    gl.readPixels(0, 0, w, hgt, gl.RGBA, gl.UNSIGNED_BYTE, px);
+    const clear = new THREE.Color(0xb0bec5);
+    const [r, g, b] = [clear.r, clear.g, clear.b].map((c) => Math.round(c * 255));
+    let drawn = 0;
+    for (let i = 0; i < px.length; i += 4) {
+      if (Math.abs(px[i] - r) > 2 || Math.abs(px[i + 1] - g) > 2 || Math.abs(px[i + 2] - b) > 2) drawn++;
+    }
+    return { width: w, height: hgt, drawn };
+  }
+}
