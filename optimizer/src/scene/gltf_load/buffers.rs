@@ -1,6 +1,6 @@
 //! Buffer resolution: the GLB `BIN` chunk, base64 `data:` URIs, and
 //! relative files next to a local glTF; never absolute paths, other schemes
-//! or `..`.
+//! or `..`. A meshopt fallback buffer without a URI has no bytes.
 
 use super::*;
 
@@ -17,6 +17,11 @@ pub(crate) fn resolve_buffers<'a>(
         let what = format!("{source}: buffer {b}");
         let declared = buffer.length();
         let data: Cow<'a, [u8]> = match buffer.source() {
+            // Its views are compressed elsewhere (`EXT_meshopt_compression`).
+            gltf::buffer::Source::Bin if is_fallback(&buffer) => {
+                out.push(Cow::Borrowed(&[][..]));
+                continue;
+            }
             gltf::buffer::Source::Bin => Cow::Borrowed(blob.ok_or_else(|| {
                 Error::bad(
                     &what,
