@@ -8,6 +8,7 @@ mod cli;
 mod corpus;
 mod fuzz;
 mod golden;
+mod lod;
 mod packed;
 mod real_scenes;
 mod report;
