@@ -1386,6 +1386,32 @@ mod tests {
         assert!(message.contains("lies outside buffer 0"), "{message}");
     }
 
+    #[test]
+    fn mutated_compressed_streams_never_panic() {
+        let (json, bin) = compressed_cube();
+        let (mut ok, mut refused) = (0, 0);
+        for at in 0..bin.len() {
+            for flip in [0x01u8, 0x80, 0xff] {
+                let mut b = bin.clone();
+                b[at] ^= flip;
+                match load(&glb(&json, &b)) {
+                    Ok(scene) => {
+                        assert_eq!(scene.objects.len(), 1);
+                        ok += 1;
+                    }
+                    Err(e) => {
+                        let m = e.to_string();
+                        // A clear error, not a caught panic.
+                        assert!(!m.contains("the parser failed"), "byte {at}: {m}");
+                        refused += 1;
+                    }
+                }
+            }
+        }
+        // Both outcomes happen: the streams are read, not skipped.
+        assert!(ok > 0 && refused > 0, "{ok} loaded, {refused} refused");
+    }
+
     /// A scene with one object of three levels: parent node 0 (translation
     /// x = 100) → base node 1 (cube at x + 1, `MSFT_lod` ids [2, 3]); node 2
     /// a one-triangle mesh at y + 5, node 3 the cube scaled by 2; node 4 an
