@@ -672,6 +672,76 @@ mod tests {
         assert_eq!(t.wrap_s, Wrap::ClampToEdge);
     }
 
+    /// A GLB with its JSON chunk changed by `edit` (the BIN chunk kept).
+    fn edit_glb(glb: &[u8], edit: impl FnOnce(&mut serde_json::Value)) -> Vec<u8> {
+        let n = u32::from_le_bytes(glb[12..16].try_into().unwrap()) as usize;
+        let mut json: serde_json::Value = serde_json::from_slice(&glb[20..20 + n]).unwrap();
+        edit(&mut json);
+        let mut text = serde_json::to_vec(&json).unwrap();
+        while !text.len().is_multiple_of(4) {
+            text.push(b' ');
+        }
+        let bin = &glb[20 + n..];
+        let mut out = b"glTF".to_vec();
+        out.extend(2u32.to_le_bytes());
+        out.extend(((12 + 8 + text.len() + bin.len()) as u32).to_le_bytes());
+        out.extend((text.len() as u32).to_le_bytes());
+        out.extend(b"JSON");
+        out.extend(text);
+        out.extend(bin);
+        out
+    }
+
+    #[test]
+    fn texture_transform_of_the_base_colour_texture_is_applied() {
+        use crate::scene::glb::{self, GlbBuilder, Node};
+        use crate::scene::material;
+        let png = crate::bake::encode_png(&[200u8; 16], 2, 2).unwrap();
+        let mut b = GlbBuilder::new();
+        let image = b.add_image_png("t", &png).unwrap();
+        let texture = b.add_texture(image, None).unwrap();
+        let mut m = material::Material::new("m", [1.0; 4]);
+        m.base_color_texture = Some(texture);
+        let material = b.add_material(&m).unwrap();
+        // Quantized texture coordinates as gltfpack writes them: integers
+        // of a 12-bit grid (here 0 … 4095), scaled and offset back.
+        let g = glb::Geometry {
+            positions: &[[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]],
+            normals: None,
+            texcoords: Some(&[[0.0, 0.0], [4095.0, 0.0], [0.0, 4095.0]]),
+            indices: &[0, 1, 2],
+        };
+        let mesh = b.add_mesh_from("tri", &[(g, Some(material))]).unwrap();
+        let n = b.add_node(Node::new("a").with_mesh(mesh)).unwrap();
+        b.set_scene_roots(&[n]).unwrap();
+        let plain = b.finish();
+        let scale = 2.0 / 4095.0;
+        let with = edit_glb(&plain, |j| {
+            j["materials"][0]["pbrMetallicRoughness"]["baseColorTexture"]["extensions"] = serde_json::json!({"KHR_texture_transform":
+                    {"offset": [-1.0, 0.5], "scale": [scale, scale]}});
+            j["extensionsUsed"] = serde_json::json!(["KHR_texture_transform"]);
+            j["extensionsRequired"] = serde_json::json!(["KHR_texture_transform"]);
+        });
+        // Control: without the extension the stored integers are read.
+        let g0 = load_geometry_bytes(&plain, "plain.glb").unwrap();
+        assert_eq!(g0.meshes[0].uvs[1], Vec2::new(4095.0, 0.0));
+        let g1 = load_geometry_bytes(&with, "with.glb").unwrap();
+        let uvs = &g1.meshes[0].uvs;
+        let close = |a: Vec2, b: Vec2| (a - b).length() < 1e-5;
+        assert!(close(uvs[0], Vec2::new(-1.0, 0.5)), "{uvs:?}");
+        assert!(close(uvs[1], Vec2::new(1.0, 0.5)), "{uvs:?}");
+        assert!(close(uvs[2], Vec2::new(-1.0, 2.5)), "{uvs:?}");
+        // A non-finite transform is refused, naming it.
+        let bad = edit_glb(&with, |j| {
+            j["materials"][0]["pbrMetallicRoughness"]["baseColorTexture"]["extensions"]["KHR_texture_transform"]
+                ["scale"] = serde_json::json!([1e39, 1.0]);
+        });
+        let e = load_geometry_bytes(&bad, "bad.glb")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("material 0 KHR_texture_transform"), "{e}");
+    }
+
     /// Textures that share an image share its decoded pixels, whatever
     /// their samplers: the image is decoded once (24 textures over one
     /// 8192² image would otherwise hold 24 × 256 MB).
