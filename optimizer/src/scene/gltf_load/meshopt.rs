@@ -12,9 +12,10 @@
 //! `count × byteStride` must equal the view's `byteLength`, the stride must
 //! suit the mode and filter, the compressed range must lie inside its
 //! buffer, and the decoded bytes of all views together are at most
-//! [`MAX_DECODED_BYTES`]. A buffer marked `fallback` holds no data of its
-//! own (a GLB writes none); it resolves to no bytes, and a view that reads
-//! it without being compressed fails the usual range check.
+//! [`MAX_DECODED_BYTES`]. A buffer marked `fallback` is never read (a GLB
+//! holds no data for it; a `.gltf` may name a file that need not exist):
+//! it resolves to no bytes, and a view that reads it without being
+//! compressed fails the usual range check.
 
 use super::*;
 use gltf::json::validation::USize64;

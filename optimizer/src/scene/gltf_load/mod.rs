@@ -1343,6 +1343,11 @@ mod tests {
             message.contains("lies outside buffer 1 (0 bytes)"),
             "{message}"
         );
+        // A fallback buffer naming a file is not read either (here it
+        // would be refused: uploads may not name files).
+        let mut named = json.clone();
+        named["buffers"][1]["uri"] = json!("city.fallback.bin");
+        assert_eq!(load(&glb(&named, &bin)).unwrap().objects[0].triangles, 12);
     }
 
     #[test]
