@@ -7,6 +7,7 @@ mod bake;
 mod evaluate;
 mod gen_city;
 mod info;
+mod lod;
 mod output;
 mod place;
 mod progress;
@@ -54,6 +55,10 @@ enum Command {
     GenCity(gen_city::GenCityArgs),
     /// Print a scene's statistics: objects, triangles, draw calls, bounds.
     Info(info::InfoArgs),
+    /// Write the scene as one GLB with generated levels of detail as
+    /// `MSFT_lod` nodes (the levels and switching coverages the cost model
+    /// uses with the job's `lod` options).
+    Lod(lod::LodArgs),
     /// Write the JSON Schemas of the job, scene summary, placement and
     /// evaluation files.
     Schema(schema::SchemaArgs),
@@ -148,6 +153,7 @@ fn run(cli: Cli) -> Result<ExitCode> {
         Command::Bake(a) => bake::run(a),
         Command::GenCity(a) => gen_city::run(a),
         Command::Info(a) => info::run(a),
+        Command::Lod(a) => lod::run(a),
         Command::Schema(a) => schema::run(a),
     }
 }

@@ -8,6 +8,8 @@ mod cli;
 mod corpus;
 mod fuzz;
 mod golden;
+mod lod;
+mod packed;
 mod real_scenes;
 mod report;
 mod schemas;

@@ -363,19 +363,8 @@ fn blit(atlas: &mut [u8], aw: u32, layer: &Layer, slot: Slot, gutter: u32) {
     }
 }
 
-/// Encodes RGBA8 pixels as PNG.
-pub fn encode_png(rgba: &[u8], w: u32, h: u32) -> Result<Vec<u8>> {
-    use image::ImageEncoder;
-    let mut out = Vec::new();
-    image::codecs::png::PngEncoder::new_with_quality(
-        &mut out,
-        image::codecs::png::CompressionType::Fast,
-        image::codecs::png::FilterType::Adaptive,
-    )
-    .write_image(rgba, w, h, image::ExtendedColorType::Rgba8)
-    .map_err(|e| Error::Internal(format!("PNG encoding: {e}")))?;
-    Ok(out)
-}
+/// Encodes RGBA8 pixels as PNG (the GLB writer's encoder).
+pub use crate::scene::glb::encode_png;
 
 /// Renders the layers of every impostor of `placement` (in impostor, then
 /// layer order; layers without a covered texel are left out), in parallel

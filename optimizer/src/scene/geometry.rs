@@ -13,7 +13,9 @@
 //! Base colour images (PNG, JPEG) are decoded to RGBA8 with their size
 //! checked before decoding (at most [`MAX_IMAGE_SIDE`] per side). An image in
 //! another format (e.g. KTX2) or that fails to decode is an error naming it.
-//! `KHR_texture_transform` is ignored; only `TEXCOORD_0` is read.
+//! Only `TEXCOORD_0` is read; a base colour texture's
+//! `KHR_texture_transform` (how `gltfpack` dequantizes texture coordinates)
+//! is applied to the coordinates of the primitives that use its material.
 
 use std::borrow::Cow;
 use std::io::Cursor;
@@ -25,10 +27,10 @@ use gltf::accessor::{DataType, Dimensions};
 use gltf::mesh::Mode;
 
 use crate::scene::gltf_load::{
-    AccessorBytes, base_dir_of, check_glb_header, check_indices, checked_accessor, gltf_error,
-    guarded, precheck_root_with, read_uri, resolve_buffers, type_name, walk_scene,
+    base_dir_of, check_glb_header, check_indices, checked_accessor, decode_compressed_views,
+    gltf_error, guarded, precheck_root_with, read_floats, read_uri, resolve_buffers, walk_scene,
 };
-use crate::scene::material::{AlphaMode, Material, Wrap};
+use crate::scene::material::{AlphaMode, Material, UvTransform, Wrap, uv_transform};
 use crate::{Error, Result};
 
 /// The largest decoded image side, texels.
@@ -152,7 +154,8 @@ fn load_inner(bytes: &[u8], source: &str, base_dir: Option<&Path>) -> Result<Sce
     let mut root = document.into_json();
     precheck_root_with(&mut root, source, true)?;
     let doc = gltf::Document::from_json(root).map_err(|e| gltf_error(source, e))?;
-    let buffers = resolve_buffers(&doc, blob.as_deref(), source, base_dir)?;
+    let mut buffers = resolve_buffers(&doc, blob.as_deref(), source, base_dir)?;
+    let doc = decode_compressed_views(doc, &mut buffers, source)?;
     let scene_instances = walk_scene(&doc, source)?;
 
     // Textures used as base colour; each image is decoded once, however
@@ -162,9 +165,21 @@ fn load_inner(bytes: &[u8], source: &str, base_dir: Option<&Path>) -> Result<Sce
     let mut image_of: Vec<Option<Decoded>> = vec![None; doc.images().len()];
     let mut image_budget = MAX_DECODED_IMAGE_BYTES;
     let mut materials = Vec::with_capacity(doc.materials().len() + 1);
+    let mut uv_transforms: Vec<Option<UvTransform>> = Vec::new();
     for m in doc.materials() {
         let pbr = m.pbr_metallic_roughness();
         let mut tex = None;
+        let uv = pbr
+            .base_color_texture()
+            .map(|info| {
+                uv_transform(
+                    &info,
+                    &format!("{source}: material {}", m.index().unwrap_or(0)),
+                )
+            })
+            .transpose()?
+            .flatten();
+        uv_transforms.push(uv);
         if let Some(info) = pbr.base_color_texture() {
             let t = info.texture();
             if texture_of[t.index()].is_none() {
@@ -227,6 +242,11 @@ fn load_inner(bytes: &[u8], source: &str, base_dir: Option<&Path>) -> Result<Sce
                         .material()
                         .index()
                         .map_or(default_material, |i| i as u32);
+                    if let Some(t) = prim.material().index().and_then(|i| uv_transforms[i]) {
+                        for uv in &mut data.uvs {
+                            *uv = t.apply(*uv);
+                        }
+                    }
                     meshes.push(data);
                     ids.push(meshes.len() as u32 - 1);
                 }
@@ -351,49 +371,6 @@ fn decode_image(
     Ok((rgba.width(), rgba.height(), rgba.into_raw()))
 }
 
-/// Reads a float attribute of `n` components per element (normalized
-/// unsigned byte/short texture coordinates are converted).
-fn read_floats<const N: usize>(
-    acc: &gltf::Accessor,
-    buffers: &[Cow<'_, [u8]>],
-    what: &str,
-    dims: Dimensions,
-) -> Result<Vec<[f32; N]>> {
-    let ok_type = acc.dimensions() == dims
-        && (acc.data_type() == DataType::F32
-            || (acc.normalized() && matches!(acc.data_type(), DataType::U8 | DataType::U16)));
-    if !ok_type {
-        return Err(Error::bad(
-            what,
-            format!(
-                "accessor {} has unsupported type {}",
-                acc.index(),
-                type_name(acc)
-            ),
-        ));
-    }
-    let data: AccessorBytes = checked_accessor(acc, buffers, what)?;
-    let mut out = Vec::with_capacity(data.count);
-    for k in 0..data.count {
-        let e = data.element(k);
-        let mut v = [0f32; N];
-        for (i, c) in v.iter_mut().enumerate() {
-            *c = match acc.data_type() {
-                DataType::F32 => {
-                    f32::from_le_bytes([e[4 * i], e[4 * i + 1], e[4 * i + 2], e[4 * i + 3]])
-                }
-                DataType::U8 => f32::from(e[i]) / 255.0,
-                _ => f32::from(u16::from_le_bytes([e[2 * i], e[2 * i + 1]])) / 65535.0,
-            };
-            if !c.is_finite() {
-                return Err(Error::bad(what, format!("element {k} is not finite")));
-            }
-        }
-        out.push(v);
-    }
-    Ok(out)
-}
-
 /// Reads one primitive as a triangle list; `None` for points and lines.
 fn read_primitive(
     prim: &gltf::Primitive,
@@ -409,16 +386,6 @@ fn read_primitive(
     let pos_acc = prim
         .get(&gltf::Semantic::Positions)
         .ok_or_else(|| Error::bad(format!("{what} POSITION"), "is missing"))?;
-    if pos_acc.data_type() != DataType::F32 {
-        return Err(Error::bad(
-            format!("{what} POSITION"),
-            format!(
-                "accessor {} is {}, expected VEC3 FLOAT",
-                pos_acc.index(),
-                type_name(&pos_acc)
-            ),
-        ));
-    }
     let positions: Vec<Vec3> = read_floats::<3>(
         &pos_acc,
         buffers,
@@ -703,6 +670,76 @@ mod tests {
         assert_eq!((t.width, t.height), (2, 2));
         assert_eq!(*t.rgba, texels[..]);
         assert_eq!(t.wrap_s, Wrap::ClampToEdge);
+    }
+
+    /// A GLB with its JSON chunk changed by `edit` (the BIN chunk kept).
+    fn edit_glb(glb: &[u8], edit: impl FnOnce(&mut serde_json::Value)) -> Vec<u8> {
+        let n = u32::from_le_bytes(glb[12..16].try_into().unwrap()) as usize;
+        let mut json: serde_json::Value = serde_json::from_slice(&glb[20..20 + n]).unwrap();
+        edit(&mut json);
+        let mut text = serde_json::to_vec(&json).unwrap();
+        while !text.len().is_multiple_of(4) {
+            text.push(b' ');
+        }
+        let bin = &glb[20 + n..];
+        let mut out = b"glTF".to_vec();
+        out.extend(2u32.to_le_bytes());
+        out.extend(((12 + 8 + text.len() + bin.len()) as u32).to_le_bytes());
+        out.extend((text.len() as u32).to_le_bytes());
+        out.extend(b"JSON");
+        out.extend(text);
+        out.extend(bin);
+        out
+    }
+
+    #[test]
+    fn texture_transform_of_the_base_colour_texture_is_applied() {
+        use crate::scene::glb::{self, GlbBuilder, Node};
+        use crate::scene::material;
+        let png = crate::bake::encode_png(&[200u8; 16], 2, 2).unwrap();
+        let mut b = GlbBuilder::new();
+        let image = b.add_image_png("t", &png).unwrap();
+        let texture = b.add_texture(image, None).unwrap();
+        let mut m = material::Material::new("m", [1.0; 4]);
+        m.base_color_texture = Some(texture);
+        let material = b.add_material(&m).unwrap();
+        // Quantized texture coordinates as gltfpack writes them: integers
+        // of a 12-bit grid (here 0 … 4095), scaled and offset back.
+        let g = glb::Geometry {
+            positions: &[[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]],
+            normals: None,
+            texcoords: Some(&[[0.0, 0.0], [4095.0, 0.0], [0.0, 4095.0]]),
+            indices: &[0, 1, 2],
+        };
+        let mesh = b.add_mesh_from("tri", &[(g, Some(material))]).unwrap();
+        let n = b.add_node(Node::new("a").with_mesh(mesh)).unwrap();
+        b.set_scene_roots(&[n]).unwrap();
+        let plain = b.finish();
+        let scale = 2.0 / 4095.0;
+        let with = edit_glb(&plain, |j| {
+            j["materials"][0]["pbrMetallicRoughness"]["baseColorTexture"]["extensions"] = serde_json::json!({"KHR_texture_transform":
+                    {"offset": [-1.0, 0.5], "scale": [scale, scale]}});
+            j["extensionsUsed"] = serde_json::json!(["KHR_texture_transform"]);
+            j["extensionsRequired"] = serde_json::json!(["KHR_texture_transform"]);
+        });
+        // Control: without the extension the stored integers are read.
+        let g0 = load_geometry_bytes(&plain, "plain.glb").unwrap();
+        assert_eq!(g0.meshes[0].uvs[1], Vec2::new(4095.0, 0.0));
+        let g1 = load_geometry_bytes(&with, "with.glb").unwrap();
+        let uvs = &g1.meshes[0].uvs;
+        let close = |a: Vec2, b: Vec2| (a - b).length() < 1e-5;
+        assert!(close(uvs[0], Vec2::new(-1.0, 0.5)), "{uvs:?}");
+        assert!(close(uvs[1], Vec2::new(1.0, 0.5)), "{uvs:?}");
+        assert!(close(uvs[2], Vec2::new(-1.0, 2.5)), "{uvs:?}");
+        // A non-finite transform is refused, naming it.
+        let bad = edit_glb(&with, |j| {
+            j["materials"][0]["pbrMetallicRoughness"]["baseColorTexture"]["extensions"]["KHR_texture_transform"]
+                ["scale"] = serde_json::json!([1e39, 1.0]);
+        });
+        let e = load_geometry_bytes(&bad, "bad.glb")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("material 0 KHR_texture_transform"), "{e}");
     }
 
     /// Textures that share an image share its decoded pixels, whatever

@@ -83,6 +83,20 @@ pub fn generate(
     screen_px: f64,
     max_error_px: f64,
 ) -> Result<LodReport> {
+    generate_kept(scene, geom, params, focal_px, screen_px, max_error_px).map(|(r, _)| r)
+}
+
+/// [`generate`], also giving per object the simplification steps `k`
+/// (`1 … levels`, increasing) of its kept levels, empty for an object
+/// without generated levels.
+pub(crate) fn generate_kept(
+    scene: &mut Scene,
+    geom: &SceneGeometry,
+    params: &LodParams,
+    focal_px: f64,
+    screen_px: f64,
+    max_error_px: f64,
+) -> Result<(LodReport, Vec<Vec<usize>>)> {
     check_params(params, focal_px, screen_px, max_error_px)?;
     let n = scene.objects.len();
     if geom.object_count() != n {
@@ -166,6 +180,7 @@ pub fn generate(
     }
     report.meshes_simplified = cache.len() as u64;
 
+    let mut steps: Vec<Vec<usize>> = vec![Vec::new(); n];
     for id in eligible {
         let o = &mut scene.objects[id];
         let radius = o.radius();
@@ -184,6 +199,7 @@ pub fn generate(
             let c = coverage(error * focal_px / max_error_px);
             if tris < last_tris && error > last_error && c < last_coverage && c > 0.0 {
                 kept.push((tris, error, c));
+                steps[id].push(k);
                 (last_tris, last_error, last_coverage) = (tris, error, c);
             }
         }
@@ -214,7 +230,7 @@ pub fn generate(
         o.lods = lods;
     }
     scene.validate("lod generation")?;
-    Ok(report)
+    Ok((report, steps))
 }
 
 fn check_params(
@@ -247,11 +263,38 @@ fn check_params(
     Ok(())
 }
 
+/// One primitive welded and simplified: what [`simplify_levels`] gives.
+pub(crate) struct Simplified {
+    /// The welded positions.
+    pub(crate) positions: Vec<[f32; 3]>,
+    /// For each welded position, the original vertex it was first used as.
+    pub(crate) first: Vec<u32>,
+    /// Per step `k = 1 … levels` (entry `k − 1`): the triangle list over
+    /// `positions` and its error in the mesh's local units.
+    pub(crate) levels: Vec<(Vec<u32>, f64)>,
+}
+
 /// Simplifies one primitive to `ratio^k` of its index count for `k = 1 …
 /// levels` after checking what meshoptimizer does not: finite positions,
 /// indices in range, a whole number of triangles, targets never above the
 /// index count.
 fn simplify_mesh(mesh: &MeshData, m: u32, params: &LodParams) -> Result<MeshLevels> {
+    let full = mesh.indices.len() as u64 / 3;
+    let s = simplify_levels(mesh, m, params)?;
+    let mut out = MeshLevels {
+        triangles: vec![full; params.levels as usize + 1],
+        error: vec![0.0; params.levels as usize + 1],
+    };
+    for (k, (indices, error)) in s.levels.iter().enumerate() {
+        out.triangles[k + 1] = indices.len() as u64 / 3;
+        out.error[k + 1] = *error;
+    }
+    Ok(out)
+}
+
+/// The simplified index lists behind [`simplify_mesh`]'s counts (the same
+/// checks; an empty mesh keeps no levels).
+pub(crate) fn simplify_levels(mesh: &MeshData, m: u32, params: &LodParams) -> Result<Simplified> {
     let what = || format!("lod generation: mesh {m}");
     let count = mesh.indices.len();
     if !count.is_multiple_of(3) {
@@ -277,44 +320,46 @@ fn simplify_mesh(mesh: &MeshData, m: u32, params: &LodParams) -> Result<MeshLeve
     if let Some(k) = mesh.positions.iter().position(|p| !p.is_finite()) {
         return Err(Error::bad(what(), format!("position {k} is not finite")));
     }
-    let levels = params.levels as usize;
-    let full = count as u64 / 3;
-    let mut out = MeshLevels {
-        triangles: vec![full; levels + 1],
-        error: vec![0.0; levels + 1],
+    let (positions, indices, first) = weld(&mesh.positions, &mesh.indices);
+    let mut out = Simplified {
+        positions,
+        first,
+        levels: Vec::new(),
     };
     if count == 0 {
+        out.levels = vec![(Vec::new(), 0.0); params.levels as usize];
         return Ok(out);
     }
-    let (positions, indices) = weld(&mesh.positions, &mesh.indices);
-    let scale = f64::from(meshopt::simplify_scale_decoder(&positions));
-    for k in 1..=levels {
+    let scale = f64::from(meshopt::simplify_scale_decoder(&out.positions));
+    for k in 1..=params.levels as usize {
         let wanted = (count as f64 * params.ratio.powi(k as i32) / 3.0).floor() as usize * 3;
         let target = wanted.clamp(3, count);
         let mut error = 0.0f32;
         let result = meshopt::simplify_decoder(
             &indices,
-            &positions,
+            &out.positions,
             target,
             1.0,
             meshopt::SimplifyOptions::None,
             Some(&mut error),
         );
-        out.triangles[k] = result.len() as u64 / 3;
-        out.error[k] = if error.is_finite() {
+        let error = if error.is_finite() {
             f64::from(error.max(0.0)) * scale
         } else {
             f64::INFINITY
         };
+        out.levels.push((result, error));
     }
     Ok(out)
 }
 
 /// Welds vertices at bit-identical positions (−0 and +0 alike): the unique
-/// positions in first-use order and the remapped indices.
-fn weld(positions: &[Vec3], indices: &[u32]) -> (Vec<[f32; 3]>, Vec<u32>) {
+/// positions in first-use order, the remapped indices, and for each unique
+/// position the original vertex first used for it.
+fn weld(positions: &[Vec3], indices: &[u32]) -> (Vec<[f32; 3]>, Vec<u32>, Vec<u32>) {
     let mut id_of: HashMap<[u32; 3], u32> = HashMap::new();
     let mut unique: Vec<[f32; 3]> = Vec::new();
+    let mut first: Vec<u32> = Vec::new();
     let mut remap: Vec<u32> = vec![u32::MAX; positions.len()];
     let mut out = Vec::with_capacity(indices.len());
     for &i in indices {
@@ -324,12 +369,13 @@ fn weld(positions: &[Vec3], indices: &[u32]) -> (Vec<[f32; 3]>, Vec<u32>) {
             let key = p.map(f32::to_bits);
             *slot = *id_of.entry(key).or_insert_with(|| {
                 unique.push(p);
+                first.push(i);
                 unique.len() as u32 - 1
             });
         }
         out.push(*slot);
     }
-    (unique, out)
+    (unique, out, first)
 }
 
 /// The largest factor by which `m` stretches a length: its largest singular
@@ -669,7 +715,7 @@ mod tests {
             Vec3::X,
             Vec3::Y,
         ];
-        let (u, i) = weld(&p, &[0, 1, 4, 2, 3, 4]);
+        let (u, i, _) = weld(&p, &[0, 1, 4, 2, 3, 4]);
         assert_eq!(u, [[0.0; 3], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]]);
         assert_eq!(i, [0, 1, 2, 0, 1, 2]);
     }

@@ -9,6 +9,7 @@ pub mod glb;
 pub mod gltf_load;
 pub mod hierarchy;
 pub mod lod;
+pub mod lod_write;
 pub mod material;
 
 use crate::api::scene::{LodLevel, SceneSummary, SummaryObject};

@@ -39,6 +39,7 @@ mod read;
 mod write;
 
 pub(crate) use read::object_extras;
+pub use write::encode_png;
 
 use std::collections::BTreeSet;
 

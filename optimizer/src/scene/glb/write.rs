@@ -504,6 +504,20 @@ impl GlbBuilder {
     }
 }
 
+/// Encodes RGBA8 pixels as PNG (fast compression, adaptive filters).
+pub fn encode_png(rgba: &[u8], w: u32, h: u32) -> Result<Vec<u8>> {
+    use image::ImageEncoder;
+    let mut out = Vec::new();
+    image::codecs::png::PngEncoder::new_with_quality(
+        &mut out,
+        image::codecs::png::CompressionType::Fast,
+        image::codecs::png::FilterType::Adaptive,
+    )
+    .write_image(rgba, w, h, image::ExtendedColorType::Rgba8)
+    .map_err(|e| crate::Error::Internal(format!("PNG encoding: {e}")))?;
+    Ok(out)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -138,37 +138,14 @@ pub(super) fn mesh_info(
         let pos = prim
             .get(&gltf::Semantic::Positions)
             .ok_or_else(|| Error::bad(&what, "is missing"))?;
-        if pos.dimensions() != Dimensions::Vec3 || pos.data_type() != DataType::F32 {
-            return Err(Error::bad(
-                &what,
-                format!(
-                    "accessor {} is {}, expected VEC3 FLOAT (quantized positions are not \
-                     supported)",
-                    pos.index(),
-                    type_name(&pos)
-                ),
-            ));
-        }
-        let data = checked_accessor(&pos, buffers, &what)?;
-        for k in 0..data.count {
-            let e = data.element(k);
-            let v = [
-                f32::from_le_bytes([e[0], e[1], e[2], e[3]]),
-                f32::from_le_bytes([e[4], e[5], e[6], e[7]]),
-                f32::from_le_bytes([e[8], e[9], e[10], e[11]]),
-            ];
-            if !v.iter().all(|c| c.is_finite()) {
-                return Err(Error::bad(
-                    &what,
-                    format!("vertex {k} is not finite ({v:?})"),
-                ));
-            }
+        let points = read_floats::<3>(&pos, buffers, &what, Dimensions::Vec3)?;
+        for v in &points {
             for i in 0..3 {
                 lo[i] = lo[i].min(v[i]);
                 hi[i] = hi[i].max(v[i]);
             }
         }
-        let vertices = data.count;
+        let vertices = points.len();
 
         let elements = match prim.indices() {
             None => vertices,

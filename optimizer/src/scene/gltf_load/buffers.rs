@@ -1,6 +1,6 @@
 //! Buffer resolution: the GLB `BIN` chunk, base64 `data:` URIs, and
 //! relative files next to a local glTF; never absolute paths, other schemes
-//! or `..`.
+//! or `..`. A meshopt fallback buffer is never read: it has no bytes.
 
 use super::*;
 
@@ -16,6 +16,12 @@ pub(crate) fn resolve_buffers<'a>(
         let b = buffer.index();
         let what = format!("{source}: buffer {b}");
         let declared = buffer.length();
+        if is_fallback(&buffer) {
+            // Only compressed views (`EXT_meshopt_compression`) name it,
+            // and they are decoded from elsewhere: never read.
+            out.push(Cow::Borrowed(&[][..]));
+            continue;
+        }
         let data: Cow<'a, [u8]> = match buffer.source() {
             gltf::buffer::Source::Bin => Cow::Borrowed(blob.ok_or_else(|| {
                 Error::bad(

@@ -114,15 +114,17 @@ pub(crate) fn precheck_root_with(
                 format!("the file requires {ext}, which is not supported; {hint}"),
             ));
         }
-        if !APPEARANCE_EXTENSIONS.contains(&ext.as_str()) && ext != "MSFT_lod" {
+        let read_here = ["MSFT_lod", "KHR_mesh_quantization", EXT_MESHOPT];
+        if !APPEARANCE_EXTENSIONS.contains(&ext.as_str()) && !read_here.contains(&ext.as_str()) {
             return Err(Error::bad(
                 format!("{source}: extensionsRequired"),
                 format!("the file requires the unknown extension {ext}"),
             ));
         }
     }
-    // Placement ignores appearance, so these need not be understood (and
-    // `MSFT_lod` is read by `walk_scene`), and
+    // Placement ignores appearance, so these need not be understood
+    // (`MSFT_lod` is read by `walk_scene`, quantized attributes by
+    // `read_floats`, compressed views by `decode_compressed_views`), and
     // materials, textures and images are dropped before validation: a
     // KTX2-only texture (no `source`) or a broken image then cannot reject
     // a scene whose geometry is fine.

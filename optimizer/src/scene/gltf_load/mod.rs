@@ -7,6 +7,17 @@
 //! vertex positions (for bounds) and the indices (for triangle counts and a
 //! range check). Images, materials and animations are never touched.
 //!
+//! # Quantized and compressed geometry
+//!
+//! Files as `gltfpack` writes them load: `KHR_mesh_quantization`
+//! attributes (8- and 16-bit integers, normalized or not, read by
+//! [`quantized`]; the node transforms that dequantize them are ordinary
+//! transforms) and `EXT_meshopt_compression` buffer views (decoded by
+//! [`meshopt`] before any accessor is read, within
+//! [`MAX_DECODED_BYTES`]). Other geometry extensions a file requires
+//! (Draco, GPU instancing) and unknown required extensions are refused
+//! with an error naming them.
+//!
 //! # Levels of detail (`MSFT_lod`)
 //!
 //! A node with `"extensions": {"MSFT_lod": {"ids": [n1, n2, …]}}` names
@@ -58,11 +69,16 @@
 mod accessors;
 mod buffers;
 mod document;
+mod meshopt;
+mod quantized;
 mod walk;
 
 pub(crate) use accessors::*;
 pub(crate) use buffers::*;
 pub(crate) use document::*;
+pub use meshopt::MAX_DECODED_BYTES;
+pub(crate) use meshopt::{EXT_MESHOPT, decode_compressed_views, is_fallback};
+pub(crate) use quantized::*;
 pub(crate) use walk::*;
 
 use std::borrow::Cow;
@@ -91,15 +107,8 @@ const MAX_STRIDE: usize = 252;
 const GEOMETRY_EXTENSIONS: &[(&str, &str)] = &[
     (
         "KHR_draco_mesh_compression",
-        "decompress it first, e.g. `gltf-transform copy in.glb out.glb` or `gltfpack -noq`",
-    ),
-    (
-        "EXT_meshopt_compression",
-        "decompress it first, e.g. `gltfpack -noq` or `gltf-transform copy`",
-    ),
-    (
-        "KHR_mesh_quantization",
-        "write unquantized positions, e.g. `gltfpack -noq` or `gltf-transform dequantize`",
+        "decompress it first, e.g. `gltf-transform copy in.glb out.glb` or `gltfpack` (its \
+         quantized, meshopt-compressed output is read)",
     ),
     (
         "EXT_mesh_gpu_instancing",
@@ -286,7 +295,8 @@ fn load_gltf_inner(bytes: &[u8], source: &str, base_dir: Option<&Path>) -> Resul
     precheck_root(&mut root, source)?;
     let doc = gltf::Document::from_json(root).map_err(|e| gltf_error(source, e))?;
 
-    let buffers = resolve_buffers(&doc, blob.as_deref(), source, base_dir)?;
+    let mut buffers = resolve_buffers(&doc, blob.as_deref(), source, base_dir)?;
+    let doc = decode_compressed_views(doc, &mut buffers, source)?;
     let instances = walk_scene(&doc, source)?;
 
     // Read every mesh the scene uses once, in parallel; report the error of
@@ -1014,8 +1024,11 @@ mod tests {
             (json!({"count": 0}), "count 0"),
             (json!({"count": 1u64 << 62}), "does not fit"),
             (json!({"byteOffset": 4}), "does not fit"),
-            (json!({"componentType": 5121}), "VEC3 FLOAT"),
-            (json!({"type": "SCALAR"}), "VEC3 FLOAT"),
+            (
+                json!({"componentType": 5125}),
+                "is VEC3 UNSIGNED_INT, expected VEC3",
+            ),
+            (json!({"type": "SCALAR"}), "is SCALAR FLOAT, expected VEC3"),
             (json!({"bufferView": null}), "bufferView"),
             (
                 json!({"sparse": {"count": 1,
@@ -1163,14 +1176,245 @@ mod tests {
         d.json["extensionsRequired"] = json!(["KHR_texture_transform", "KHR_materials_unlit"]);
         d.json["extensionsUsed"] = json!(["KHR_texture_transform", "KHR_materials_unlit"]);
         assert!(load(&d.glb()).is_ok());
-        d.json["extensionsRequired"] = json!(["KHR_mesh_quantization"]);
+        // Read since quantized and meshopt-compressed files load.
+        d.json["extensionsRequired"] = json!(["KHR_mesh_quantization", "EXT_meshopt_compression"]);
+        assert!(load(&d.glb()).is_ok());
+        d.json["extensionsRequired"] = json!(["KHR_draco_mesh_compression"]);
         let message = load_err(&d.glb());
         assert!(
-            message.contains("KHR_mesh_quantization") && message.contains("gltfpack"),
+            message.contains("KHR_draco_mesh_compression") && message.contains("gltfpack"),
             "{message}"
         );
+        d.json["extensionsRequired"] = json!(["EXT_mesh_gpu_instancing"]);
+        assert!(load_err(&d.glb()).contains("expand the instances"));
         d.json["extensionsRequired"] = json!(["VENDOR_unknown"]);
         assert!(load_err(&d.glb()).contains("VENDOR_unknown"));
+    }
+
+    /// The cube's corners quantized as `component_type` (normalized or
+    /// not) with the largest coordinate stored as `q`, and the node scale
+    /// that dequantizes them to a cube of side 2 at x = 10.
+    fn quantized_cube(component_type: u32, normalized: bool, q: f32) -> Doc {
+        let mut d = Doc::new();
+        let bytes: Vec<u8> = CUBE
+            .iter()
+            .flat_map(|p| {
+                let c = p.map(|v| v * q);
+                // Padded to 4-byte elements, as glTF requires.
+                let mut e: Vec<u8> = match component_type {
+                    5120 => c.iter().map(|&v| (v as i8) as u8).collect(),
+                    5121 => c.iter().map(|&v| v as u8).collect(),
+                    5122 => c.iter().flat_map(|&v| (v as i16).to_le_bytes()).collect(),
+                    _ => c.iter().flat_map(|&v| (v as u16).to_le_bytes()).collect(),
+                };
+                e.resize(if component_type < 5122 { 4 } else { 8 }, 0);
+                e
+            })
+            .collect();
+        let stride = if component_type < 5122 { 4 } else { 8 };
+        let view = d.view(&bytes, Some(stride));
+        let p = d.push(
+            "accessors",
+            json!({"bufferView": view, "componentType": component_type, "count": 8,
+                   "type": "VEC3", "normalized": normalized,
+                   "min": [0, 0, 0], "max": [q, q, q]}),
+        );
+        let i = d.indices_u16(&CUBE_INDICES);
+        let m = d.mesh("cube", p, Some(i), 4);
+        let unit = if normalized {
+            match component_type {
+                5120 => q / 127.0,
+                5121 => q / 255.0,
+                5122 => q / 32767.0,
+                _ => q / 65535.0,
+            }
+        } else {
+            q
+        };
+        let scale = 2.0 / unit;
+        let n = d.node(json!({"mesh": m, "translation": [10.0, 0.0, 0.0],
+                              "scale": [scale, scale, scale]}));
+        d.roots(&[n]);
+        d.json["extensionsUsed"] = json!(["KHR_mesh_quantization"]);
+        d.json["extensionsRequired"] = json!(["KHR_mesh_quantization"]);
+        d
+    }
+
+    #[test]
+    fn quantized_positions_of_every_component_type_load() {
+        for (t, normalized, q) in [
+            (5120, false, 100.0),
+            (5120, true, 127.0),
+            (5121, false, 200.0),
+            (5121, true, 255.0),
+            (5122, false, 30000.0),
+            (5122, true, 16384.0),
+            (5123, false, 60000.0),
+            (5123, true, 65535.0),
+        ] {
+            let scene = load(&quantized_cube(t, normalized, q).glb()).unwrap();
+            let o = &scene.objects[0];
+            let close = |a: DVec3, b: DVec3| (a - b).abs().max_element() < 1e-4;
+            assert!(
+                close(o.min, DVec3::new(10.0, 0.0, 0.0))
+                    && close(o.max, DVec3::new(12.0, 2.0, 2.0)),
+                "{t} normalized {normalized}: {:?} … {:?}",
+                o.min,
+                o.max
+            );
+            assert_eq!(o.triangles, 12);
+        }
+        // Control: read as plain integers, the normalized short cube would
+        // be 32767 times larger.
+        let mut d = quantized_cube(5122, true, 16384.0);
+        d.json["accessors"][0]["normalized"] = json!(false);
+        let o = &load(&d.glb()).unwrap().objects[0];
+        assert!(o.max.x > 1000.0, "{:?}", o.max);
+        // Unsigned int positions are not a quantized type.
+        let mut d = quantized_cube(5123, false, 60000.0);
+        d.json["accessors"][0]["componentType"] = json!(5125);
+        d.json["accessors"][0]["count"] = json!(4);
+        let message = load_err(&d.glb());
+        assert!(message.contains("VEC3 UNSIGNED_INT"), "{message}");
+    }
+
+    /// The cube with its positions and indices meshopt-compressed into
+    /// buffer 0, decoded into views of the fallback buffer 1 (no data).
+    fn compressed_cube() -> (Value, Vec<u8>) {
+        let points: Vec<[f32; 3]> = CUBE.to_vec();
+        let pos = ::meshopt::encode_vertex_buffer(&points).unwrap();
+        let idx: Vec<u32> = CUBE_INDICES.iter().map(|&i| u32::from(i)).collect();
+        let idx = ::meshopt::encode_index_buffer(&idx, 8).unwrap();
+        let mut bin = pos.clone();
+        while !bin.len().is_multiple_of(4) {
+            bin.push(0);
+        }
+        let idx_at = bin.len();
+        bin.extend_from_slice(&idx);
+        while !bin.len().is_multiple_of(4) {
+            bin.push(0);
+        }
+        let json = json!({
+            "asset": {"version": "2.0"},
+            "extensionsUsed": ["EXT_meshopt_compression"],
+            "extensionsRequired": ["EXT_meshopt_compression"],
+            "scene": 0,
+            "scenes": [{"nodes": [0]}],
+            "nodes": [{"mesh": 0}],
+            "meshes": [{"primitives": [{"attributes": {"POSITION": 0}, "indices": 1}]}],
+            "accessors": [
+                {"bufferView": 0, "componentType": 5126, "count": 8, "type": "VEC3",
+                 "min": [0, 0, 0], "max": [1, 1, 1]},
+                {"bufferView": 1, "componentType": 5123, "count": 36, "type": "SCALAR"}
+            ],
+            "bufferViews": [
+                {"buffer": 1, "byteOffset": 0, "byteLength": 96, "byteStride": 12,
+                 "extensions": {"EXT_meshopt_compression": {
+                    "buffer": 0, "byteOffset": 0, "byteLength": pos.len(), "byteStride": 12,
+                    "mode": "ATTRIBUTES", "count": 8}}},
+                {"buffer": 1, "byteOffset": 96, "byteLength": 72,
+                 "extensions": {"EXT_meshopt_compression": {
+                    "buffer": 0, "byteOffset": idx_at, "byteLength": idx.len(), "byteStride": 2,
+                    "mode": "TRIANGLES", "count": 36}}}
+            ],
+            "buffers": [
+                {"byteLength": bin.len()},
+                {"byteLength": 168, "extensions": {"EXT_meshopt_compression": {"fallback": true}}}
+            ]
+        });
+        (json, bin)
+    }
+
+    #[test]
+    fn meshopt_compressed_views_load() {
+        let (json, bin) = compressed_cube();
+        let scene = load(&glb(&json, &bin)).unwrap();
+        let o = &scene.objects[0];
+        assert_eq!((o.min, o.max), (DVec3::ZERO, DVec3::ONE));
+        assert_eq!(o.triangles, 12);
+        // Control: without the extension the views read the fallback
+        // buffer, which has no data.
+        let mut plain = json.clone();
+        for v in plain["bufferViews"].as_array_mut().unwrap() {
+            v.as_object_mut().unwrap().remove("extensions");
+        }
+        let message = load_err(&glb(&plain, &bin));
+        assert!(
+            message.contains("lies outside buffer 1 (0 bytes)"),
+            "{message}"
+        );
+        // A fallback buffer naming a file is not read either (here it
+        // would be refused: uploads may not name files).
+        let mut named = json.clone();
+        named["buffers"][1]["uri"] = json!("city.fallback.bin");
+        assert_eq!(load(&glb(&named, &bin)).unwrap().objects[0].triangles, 12);
+    }
+
+    #[test]
+    fn corrupt_or_hostile_compressed_views_are_clear_errors() {
+        let (json, mut bin) = compressed_cube();
+        // The vertex stream's header byte broken.
+        bin[0] = 0;
+        let message = load_err(&glb(&json, &bin));
+        assert!(
+            message.contains("bufferView 0 EXT_meshopt_compression")
+                && message.contains("ATTRIBUTES data is corrupt"),
+            "{message}"
+        );
+        // 2^40 bytes claimed: refused before any allocation.
+        let (mut json, bin) = compressed_cube();
+        let huge = 1u64 << 40;
+        json["buffers"][1]["byteLength"] = json!(huge + 72);
+        json["bufferViews"][0]["byteLength"] = json!(huge);
+        json["bufferViews"][0]["byteStride"] = json!(4);
+        json["bufferViews"][0]["extensions"]["EXT_meshopt_compression"]["byteStride"] = json!(4);
+        json["bufferViews"][0]["extensions"]["EXT_meshopt_compression"]["count"] = json!(huge / 4);
+        let message = load_err(&glb(&json, &bin));
+        assert!(
+            message.contains("more than the limit of 4294967296 bytes")
+                && message.contains("1099511627776"),
+            "{message}"
+        );
+        // A count that does not match the view.
+        let (mut json, bin) = compressed_cube();
+        json["bufferViews"][0]["extensions"]["EXT_meshopt_compression"]["count"] = json!(9);
+        let message = load_err(&glb(&json, &bin));
+        assert!(
+            message.contains("= 108 bytes, but the bufferView's byteLength is 96"),
+            "{message}"
+        );
+        // A compressed range outside its buffer.
+        let (mut json, bin) = compressed_cube();
+        json["bufferViews"][1]["extensions"]["EXT_meshopt_compression"]["byteOffset"] =
+            json!(1 << 20);
+        let message = load_err(&glb(&json, &bin));
+        assert!(message.contains("lies outside buffer 0"), "{message}");
+    }
+
+    #[test]
+    fn mutated_compressed_streams_never_panic() {
+        let (json, bin) = compressed_cube();
+        let (mut ok, mut refused) = (0, 0);
+        for at in 0..bin.len() {
+            for flip in [0x01u8, 0x80, 0xff] {
+                let mut b = bin.clone();
+                b[at] ^= flip;
+                match load(&glb(&json, &b)) {
+                    Ok(scene) => {
+                        assert_eq!(scene.objects.len(), 1);
+                        ok += 1;
+                    }
+                    Err(e) => {
+                        let m = e.to_string();
+                        // A clear error, not a caught panic.
+                        assert!(!m.contains("the parser failed"), "byte {at}: {m}");
+                        refused += 1;
+                    }
+                }
+            }
+        }
+        // Both outcomes happen: the streams are read, not skipped.
+        assert!(ok > 0 && refused > 0, "{ok} loaded, {refused} refused");
     }
 
     /// A scene with one object of three levels: parent node 0 (translation
