@@ -12,5 +12,6 @@ mod real_scenes;
 mod report;
 mod schemas;
 mod tiles;
+mod tileset;
 mod util;
 mod visibility;

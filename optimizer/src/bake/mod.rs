@@ -367,6 +367,9 @@ pub(crate) fn geom_objects(geom: &SceneGeometry) -> Vec<Vec<u32>> {
     by_object
 }
 
+/// Width and height of each atlas, texels.
+pub type AtlasSizes = Vec<(u32, u32)>;
+
 /// Writes `layers` (of `placement`'s impostors, in impostor then layer
 /// order, as [`render_layers`] gives them) as a baked GLB: the layers
 /// packed into atlases, one node and primitive per impostor. Returns the
@@ -378,7 +381,7 @@ pub fn write_glb(
     object_nodes: &[u32],
     view_space: Option<&ViewSpace>,
     opts: &BakeOptions,
-) -> Result<(Vec<u8>, Vec<(u32, u32)>)> {
+) -> Result<(Vec<u8>, AtlasSizes)> {
     if let Some(l) = layers
         .iter()
         .find(|l| placement.impostors.get(l.impostor as usize).is_none())
