@@ -20,8 +20,9 @@ pub struct BakeArgs {
     /// Placement JSON written by `place` for this scene.
     #[arg(long)]
     placement: PathBuf,
-    /// Job JSON (its memory model is used for the baked-memory report;
-    /// default: the reference memory model).
+    /// Job JSON (its memory model is used for the baked-memory report and
+    /// its view space is written into the GLB's scene extras; default: the
+    /// reference memory model, no view space).
     #[arg(long)]
     job: Option<PathBuf>,
     /// Output GLB.
@@ -37,10 +38,10 @@ pub struct BakeArgs {
 
 pub fn run(a: BakeArgs) -> Result<ExitCode> {
     set_threads(a.threads)?;
-    let memory = match &a.job {
-        Some(j) => read_job(j)?.memory,
-        None => MemoryParams::default(),
-    };
+    let job = a.job.as_deref().map(read_job).transpose()?;
+    let memory = job
+        .as_ref()
+        .map_or_else(MemoryParams::default, |j| j.memory.clone());
     let p = read_placement(&a.placement)?;
     let scene = optimizer::scene::gltf_load::load_scene_file(&a.scene)?;
     let geom = geometry::load_geometry_file(&a.scene)?;
@@ -49,6 +50,7 @@ pub fn run(a: BakeArgs) -> Result<ExitCode> {
         &scene,
         &geom,
         &memory,
+        job.as_ref().map(|j| &j.view_space),
         &p,
         &BakeOptions::default(),
         &a.placement.display().to_string(),

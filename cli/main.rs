@@ -14,6 +14,7 @@ mod progress;
 mod pvs;
 mod report;
 mod schema;
+mod tiles;
 
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
@@ -51,6 +52,10 @@ enum Command {
     /// Render a placement's impostors into layered, alpha-masked quads and
     /// write them as one GLB with texture atlases.
     Bake(bake::BakeArgs),
+    /// Export a placement and its baked impostors as a 3D Tiles 1.1
+    /// tileset: cluster geometry tiles refined (REPLACE) into impostor
+    /// tiles inside their view cells.
+    Tiles(tiles::TilesArgs),
     /// Generate a seeded, Vienna-like procedural city.
     GenCity(gen_city::GenCityArgs),
     /// Print a scene's statistics: objects, triangles, draw calls, bounds.
@@ -151,6 +156,7 @@ fn run(cli: Cli) -> Result<ExitCode> {
         Command::Report(a) => report::run(a),
         Command::Pvs(a) => pvs::run(a),
         Command::Bake(a) => bake::run(a),
+        Command::Tiles(a) => tiles::run(a),
         Command::GenCity(a) => gen_city::run(a),
         Command::Info(a) => info::run(a),
         Command::Lod(a) => lod::run(a),

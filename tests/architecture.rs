@@ -26,6 +26,7 @@ const LAYERS: &[&[&str]] = &[
     &["methods"],
     &["place"],
     &["bake"],
+    &["export"],
     &["evaluate"],
     &["report"],
     &["citygen"],

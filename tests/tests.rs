@@ -14,5 +14,6 @@ mod real_scenes;
 mod report;
 mod schemas;
 mod tiles;
+mod tileset;
 mod util;
 mod visibility;

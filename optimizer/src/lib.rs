@@ -18,6 +18,7 @@ pub mod citygen;
 pub mod control;
 pub mod error;
 pub mod evaluate;
+pub mod export;
 pub mod files;
 pub mod greedy;
 pub mod input;

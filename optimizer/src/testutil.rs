@@ -131,6 +131,7 @@ pub fn box_geometry(scene: &Scene) -> crate::scene::geometry::SceneGeometry {
         materials: vec![Material::default()],
         textures: Vec::new(),
         objects: scene.objects.len(),
+        object_nodes: Vec::new(),
     }
 }
 

@@ -3,6 +3,7 @@
 
 use schemars::schema_for;
 
+use crate::api::baked::{BakedImpostor, BakedScene};
 use crate::api::evaluation::Evaluation;
 use crate::api::job::Job;
 use crate::api::placement::Placement;
@@ -24,5 +25,7 @@ pub fn all() -> Vec<(&'static str, String)> {
         ("evaluation.schema.json", pretty(schema_for!(Evaluation))),
         ("stats.schema.json", pretty(schema_for!(Stats))),
         ("pvs.schema.json", pretty(schema_for!(PvsFile))),
+        ("baked-node.schema.json", pretty(schema_for!(BakedImpostor))),
+        ("baked-scene.schema.json", pretty(schema_for!(BakedScene))),
     ]
 }

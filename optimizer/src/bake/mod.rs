@@ -10,30 +10,36 @@
 //! quad lies at the slab's layer depth and covers the window there, so from
 //! the reference viewpoint every texel lands exactly where its geometry was.
 //!
-//! Atlases: layers are shelf-packed (largest first, then impostor id and
-//! layer) into atlases of at most `atlas_size`² texels with a gutter of
-//! edge-extended texels around each layer, so that mip levels do not bleed
-//! between neighbours; the colour of transparent texels is dilated from
-//! their covered neighbours so that filtering does not darken silhouettes.
-//! Layers without any covered texel are not written.
+//! Atlases ([`atlas`]): an impostor's layers are shelf-packed together
+//! into one atlas of at most `atlas_size`² texels (larger only for an
+//! impostor that needs more), with a gutter of edge-extended texels around
+//! each layer; the colour of transparent texels is dilated from their
+//! covered neighbours so that filtering does not darken silhouettes.
+//! Layers without any covered texel are not written. The file ([`file`])
+//! draws each impostor with one primitive (one draw call, as the cost model
+//! counts it).
+
+mod atlas;
+mod file;
+
+pub use file::read_layers;
 
 use std::collections::BTreeMap;
 
 use glam::{DAffine3, DVec3, Vec2, Vec3};
 use rayon::prelude::*;
 use serde::Serialize;
-use serde_json::json;
 
-use crate::api::job::MemoryParams;
+use crate::api::job::{MemoryParams, ViewSpace};
 use crate::api::placement::{PlacedImpostor, Placement};
 use crate::input::Prepared;
 use crate::model::layers::slabs;
 use crate::render::raster::{Raster, Surface, TextureRef, Vertex, View};
 use crate::scene::Scene;
 use crate::scene::geometry::SceneGeometry;
-use crate::scene::glb::{self, GlbBuilder, MeshPrimitive, MinFilter, Node, Sampler, object_extras};
-use crate::scene::material::{AlphaMode, Material};
+use crate::scene::material::AlphaMode;
 use crate::{Error, Result};
+use atlas::{Group, Slot};
 
 /// Baking options.
 #[derive(Clone, Copy, Debug)]
@@ -293,76 +299,6 @@ fn dilate(rgba: &[u8], res: u32) -> Vec<u8> {
     cur
 }
 
-/// Where a layer went: atlas index and top-left texel of its interior.
-#[derive(Clone, Copy, Debug)]
-struct Slot {
-    atlas: u32,
-    x: u32,
-    y: u32,
-}
-
-/// Shelf packing of square layers (sides `res + 2·gutter`) into atlases.
-/// Returns one slot per layer (same order) and each atlas's size.
-fn pack(sizes: &[u32], atlas_size: u32, gutter: u32) -> (Vec<Slot>, Vec<(u32, u32)>) {
-    let mut order: Vec<usize> = (0..sizes.len()).collect();
-    order.sort_by_key(|&i| (std::cmp::Reverse(sizes[i]), i));
-    let mut slots = vec![
-        Slot {
-            atlas: 0,
-            x: 0,
-            y: 0
-        };
-        sizes.len()
-    ];
-    let mut atlases: Vec<(u32, u32)> = Vec::new();
-    // The current atlas's shelf: top, height, cursor.
-    let (mut shelf_y, mut shelf_h, mut cursor) = (0u32, 0u32, 0u32);
-    for i in order {
-        let side = sizes[i] + 2 * gutter;
-        if let Some(&(w, _)) = atlases.last()
-            && cursor + side > w
-        {
-            shelf_y += shelf_h;
-            shelf_h = 0;
-            cursor = 0;
-        }
-        // Atlases are at most square: a full one starts the next. Sides
-        // come largest first, so the first layer of an atlas sets its width.
-        if atlases.last().is_none_or(|&(w, _)| shelf_y + side > w) {
-            atlases.push((atlas_size.max(side), 0));
-            (shelf_y, shelf_h, cursor) = (0, 0, 0);
-        }
-        let a = atlases.len() - 1;
-        slots[i] = Slot {
-            atlas: a as u32,
-            x: cursor + gutter,
-            y: shelf_y + gutter,
-        };
-        cursor += side;
-        shelf_h = shelf_h.max(side);
-        atlases[a].1 = atlases[a].1.max(shelf_y + shelf_h);
-    }
-    for a in &mut atlases {
-        a.1 = a.1.div_ceil(4) * 4;
-    }
-    (slots, atlases)
-}
-
-/// Copies a layer into an atlas with edge-extended gutters.
-fn blit(atlas: &mut [u8], aw: u32, layer: &Layer, slot: Slot, gutter: u32) {
-    let res = layer.res as i64;
-    let g = i64::from(gutter);
-    for dy in -g..res + g {
-        for dx in -g..res + g {
-            let (sx, sy) = (dx.clamp(0, res - 1), dy.clamp(0, res - 1));
-            let src = ((sy * res + sx) * 4) as usize;
-            let (tx, ty) = (i64::from(slot.x) + dx, i64::from(slot.y) + dy);
-            let dst = ((ty * i64::from(aw) + tx) * 4) as usize;
-            atlas[dst..dst + 4].copy_from_slice(&layer.rgba[src..src + 4]);
-        }
-    }
-}
-
 /// Encodes RGBA8 pixels as PNG (the GLB writer's encoder).
 pub use crate::scene::glb::encode_png;
 
@@ -411,98 +347,6 @@ fn render(geom: &SceneGeometry, impostors: &[&PlacedImpostor]) -> Vec<Layer> {
         .collect()
 }
 
-/// Reads the layers back from a GLB written by [`bake`]: every mesh node is
-/// an impostor (its `extras.impostor` is the placement id), every primitive
-/// a layer quad whose texels are cut out of its atlas by its UVs. The file
-/// is loaded with the safe geometry loader; `source` names it in errors.
-pub fn read_layers(bytes: &[u8], source: &str) -> Result<Vec<Layer>> {
-    let geom = crate::scene::geometry::load_geometry_bytes(bytes, source)?;
-    let ids = impostor_ids(bytes, source)?;
-    let mut layers = Vec::new();
-    let bad = |m: String| Error::bad(source, m);
-    for inst in &geom.instances {
-        let Some(&impostor) = ids.get(inst.object as usize) else {
-            return Err(bad(format!(
-                "object {} has no `extras.impostor`",
-                inst.object
-            )));
-        };
-        let mesh = &geom.meshes[inst.mesh as usize];
-        if mesh.positions.len() != 4 || mesh.uvs.len() != 4 {
-            return Err(bad(format!(
-                "impostor {impostor}: a layer must be a quad with texture coordinates"
-            )));
-        }
-        let tex = geom.materials[mesh.material as usize]
-            .base_color_texture
-            .and_then(|t| geom.textures.get(t as usize))
-            .ok_or_else(|| bad(format!("impostor {impostor}: a layer has no texture")))?;
-        let (aw, ah) = (f64::from(tex.width), f64::from(tex.height));
-        let x0 = (f64::from(mesh.uvs[0].x) * aw).round() as i64;
-        let y0 = (f64::from(mesh.uvs[0].y) * ah).round() as i64;
-        let x1 = (f64::from(mesh.uvs[2].x) * aw).round() as i64;
-        let y1 = (f64::from(mesh.uvs[2].y) * ah).round() as i64;
-        let res = x1 - x0;
-        if res <= 0
-            || y1 - y0 != res
-            || x0 < 0
-            || y0 < 0
-            || x1 > i64::from(tex.width)
-            || y1 > i64::from(tex.height)
-        {
-            return Err(bad(format!(
-                "impostor {impostor}: layer texture coordinates do not span a square inside the atlas"
-            )));
-        }
-        let mut rgba = Vec::with_capacity((res * res * 4) as usize);
-        for y in y0..y1 {
-            let row = ((y * i64::from(tex.width) + x0) * 4) as usize;
-            rgba.extend_from_slice(&tex.rgba[row..row + res as usize * 4]);
-        }
-        let m = inst.transform;
-        let index = layers
-            .iter()
-            .rev()
-            .take_while(|l: &&Layer| l.impostor == impostor)
-            .count() as u32;
-        layers.push(Layer {
-            impostor,
-            index,
-            res: res as u32,
-            rgba,
-            corners: [0, 1, 2, 3].map(|k| m.transform_point3(mesh.positions[k].as_dvec3())),
-            normal: mesh.normals.first().map_or(Vec3::Z, |n| {
-                (m.matrix3 * n.as_dvec3()).normalize().as_vec3()
-            }),
-        });
-    }
-    Ok(layers)
-}
-
-/// The `extras.impostor` of every object (mesh node) of a baked GLB, in
-/// object order, read with the safe glTF loader.
-fn impostor_ids(bytes: &[u8], source: &str) -> Result<Vec<u32>> {
-    object_extras(bytes, source)?
-        .iter()
-        .enumerate()
-        .map(|(object, extras)| {
-            extras
-                .as_ref()
-                .and_then(|e| e.get("impostor"))
-                .and_then(serde_json::Value::as_u64)
-                .and_then(|v| u32::try_from(v).ok())
-                .ok_or_else(|| {
-                    Error::bad(
-                        source,
-                        format!(
-                            "not a baked impostor file: object {object} lacks `extras.impostor`"
-                        ),
-                    )
-                })
-        })
-        .collect()
-}
-
 /// Per object id, its instance indices.
 pub(crate) fn geom_objects(geom: &SceneGeometry) -> Vec<Vec<u32>> {
     let mut by_object: Vec<Vec<u32>> = vec![Vec::new(); geom.object_count()];
@@ -512,99 +356,90 @@ pub(crate) fn geom_objects(geom: &SceneGeometry) -> Vec<Vec<u32>> {
     by_object
 }
 
-/// Bakes every impostor of `placement` over `geom` (the geometry of
-/// `scene`) into a GLB. The placement is checked first by
-/// [`Placement::validate`].
-/// `source` names the placement in errors.
-pub fn bake(
-    scene: &Scene,
-    geom: &SceneGeometry,
-    memory: &MemoryParams,
-    placement: &Placement,
-    opts: &BakeOptions,
-    source: &str,
-) -> Result<(Vec<u8>, BakeReport)> {
-    let layers = render_layers(scene, geom, placement, source)?;
+/// Width and height of each atlas, texels.
+pub type AtlasSizes = Vec<(u32, u32)>;
 
-    let sizes: Vec<u32> = layers.iter().map(|l| l.res).collect();
-    let (slots, atlas_sizes) = pack(&sizes, opts.atlas_size, opts.gutter);
+/// Writes `layers` (of `placement`'s impostors, in impostor then layer
+/// order, as [`render_layers`] gives them) as a baked GLB: the layers
+/// packed into atlases, one node and primitive per impostor. Returns the
+/// file and each atlas's size. `object_nodes` are the glTF node indices of
+/// the scene's objects (empty when unknown).
+pub fn write_glb(
+    placement: &Placement,
+    layers: &[Layer],
+    object_nodes: &[u32],
+    view_space: Option<&ViewSpace>,
+    opts: &BakeOptions,
+) -> Result<(Vec<u8>, AtlasSizes)> {
+    if let Some(l) = layers
+        .iter()
+        .find(|l| placement.impostors.get(l.impostor as usize).is_none())
+    {
+        return Err(Error::Internal(format!(
+            "bake: layer of impostor {} beyond the placement",
+            l.impostor
+        )));
+    }
+    // Groups of layers, one per impostor, in impostor order (layers are
+    // in impostor, then layer order).
+    let mut groups: Vec<Group> = Vec::new();
+    for (i, l) in layers.iter().enumerate() {
+        match groups.last_mut() {
+            Some(g) if i > 0 && layers[i - 1].impostor == l.impostor => g.count += 1,
+            _ => groups.push(Group {
+                res: l.res,
+                count: 1,
+            }),
+        }
+    }
+    let (group_slots, atlas_sizes) = atlas::pack(&groups, opts.atlas_size, opts.gutter);
+    let slots: Vec<Slot> = group_slots.into_iter().flatten().collect();
     let mut atlases: Vec<Vec<u8>> = atlas_sizes
         .iter()
         .map(|&(w, h)| vec![0u8; w as usize * h as usize * 4])
         .collect();
     for (l, s) in layers.iter().zip(&slots) {
         let aw = atlas_sizes[s.atlas as usize].0;
-        blit(&mut atlases[s.atlas as usize], aw, l, *s, opts.gutter);
+        atlas::blit(&mut atlases[s.atlas as usize], aw, l, *s, opts.gutter);
     }
     let pngs: Vec<Vec<u8>> = atlases
         .par_iter()
         .zip(&atlas_sizes)
         .map(|(a, &(w, h))| encode_png(a, w, h))
         .collect::<Result<_>>()?;
+    let glb = file::write(
+        placement,
+        layers,
+        &slots,
+        &file::Atlases {
+            pngs: &pngs,
+            sizes: &atlas_sizes,
+        },
+        object_nodes,
+        view_space,
+    )?;
+    Ok((glb, atlas_sizes))
+}
 
-    let mut b = GlbBuilder::new();
-    let sampler = b.add_sampler(&Sampler {
-        min_filter: MinFilter::LinearMipmapLinear,
-        ..Sampler::linear_clamp()
-    })?;
-    let mut materials = Vec::with_capacity(pngs.len());
-    for (i, png) in pngs.iter().enumerate() {
-        let image = b.add_image_png(&format!("atlas {i}"), png)?;
-        let texture = b.add_texture(image, Some(sampler))?;
-        let mut m = Material::new(format!("impostor atlas {i}"), [1.0; 4]);
-        m.base_color_texture = Some(texture);
-        m.alpha_mode = AlphaMode::Mask { cutoff: 0.5 };
-        m.double_sided = true;
-        m.unlit = true;
-        materials.push(b.add_material(&m)?);
-    }
-    // Layers grouped by impostor, in impostor order (layers are already
-    // in impostor then layer order).
-    let mut roots = Vec::new();
-    let mut i = 0;
-    while i < layers.len() {
-        let id = layers[i].impostor;
-        let mut prims = Vec::new();
-        while i < layers.len() && layers[i].impostor == id {
-            let l = &layers[i];
-            let s = slots[i];
-            let (aw, ah) = atlas_sizes[s.atlas as usize];
-            let (u0, v0) = (s.x as f32 / aw as f32, s.y as f32 / ah as f32);
-            let (u1, v1) = (
-                (s.x + l.res) as f32 / aw as f32,
-                (s.y + l.res) as f32 / ah as f32,
-            );
-            let positions = l.corners.map(|p| p.as_vec3().to_array());
-            let normals = [l.normal.to_array(); 4];
-            let uvs = [[u0, v0], [u0, v1], [u1, v1], [u1, v0]];
-            let g = b.add_geometry(&glb::Geometry {
-                positions: &positions,
-                normals: Some(&normals),
-                texcoords: Some(&uvs),
-                indices: &[0, 1, 2, 0, 2, 3],
-            })?;
-            prims.push(MeshPrimitive {
-                geometry: g,
-                material: Some(materials[s.atlas as usize]),
-            });
-            i += 1;
-        }
-        let imp = &placement.impostors[id as usize];
-        let mesh = b.add_mesh(&format!("impostor {id}"), &prims)?;
-        let node = b.add_node(
-            Node::new(format!("impostor {id}"))
-                .with_mesh(mesh)
-                .with_extras(json!({
-                    "impostor": id,
-                    "cluster": imp.node,
-                    "layers": imp.layers,
-                    "layers_written": prims.len(),
-                    "resolution": imp.resolution,
-                })),
-        )?;
-        roots.push(node);
-    }
-    b.set_scene_roots(&roots)?;
+/// Bakes every impostor of `placement` over `geom` (the geometry of
+/// `scene`) into a GLB: one node with one primitive per impostor, all its
+/// layers in one atlas, described by its `extras.impostor`
+/// ([`crate::api::baked`]); the scene's extras carry `view_space` (when
+/// given) and the placement's summary. The placement is checked first by
+/// [`Placement::validate`].
+/// `source` names the placement in errors.
+pub fn bake(
+    scene: &Scene,
+    geom: &SceneGeometry,
+    memory: &MemoryParams,
+    view_space: Option<&ViewSpace>,
+    placement: &Placement,
+    opts: &BakeOptions,
+    source: &str,
+) -> Result<(Vec<u8>, BakeReport)> {
+    let layers = render_layers(scene, geom, placement, source)?;
+
+    let (glb, atlas_sizes) = write_glb(placement, &layers, &geom.object_nodes, view_space, opts)?;
 
     let texels: u64 = layers.iter().map(|l| u64::from(l.res).pow(2)).sum();
     let mip = if memory.mipmaps { 4.0 / 3.0 } else { 1.0 };
@@ -633,7 +468,7 @@ pub fn bake(
             .sum(),
         impostor_memory_bytes: impostor_texels.into_iter().map(bytes).collect(),
     };
-    Ok((b.finish(), report))
+    Ok((glb, report))
 }
 
 impl Prepared<'_> {
@@ -656,6 +491,7 @@ impl Prepared<'_> {
             &input.scene,
             geom,
             &self.job().memory,
+            Some(&self.job().view_space),
             placement,
             opts,
             source,
@@ -666,40 +502,9 @@ impl Prepared<'_> {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn packing_never_overlaps_and_stays_inside() {
-        let mut rng = crate::math::rng::Rng::new(3);
-        let sizes: Vec<u32> = (0..300)
-            .map(|_| 4 + (rng.next_u64() % 200) as u32)
-            .collect();
-        let (gutter, atlas) = (4, 512);
-        let (slots, atlases) = pack(&sizes, atlas, gutter);
-        assert!(atlases.len() > 1);
-        let rect = |i: usize| {
-            let s = slots[i];
-            (s.atlas, s.x - gutter, s.y - gutter, sizes[i] + 2 * gutter)
-        };
-        for i in 0..sizes.len() {
-            let (a, x, y, side) = rect(i);
-            let (w, h) = atlases[a as usize];
-            assert!(x + side <= w && y + side <= h && w <= atlas && h <= atlas);
-            for j in 0..i {
-                let (b, x2, y2, side2) = rect(j);
-                let apart = a != b
-                    || x + side <= x2
-                    || x2 + side2 <= x
-                    || y + side <= y2
-                    || y2 + side2 <= y;
-                assert!(apart, "layers {i} and {j} overlap");
-            }
-        }
-        // A layer larger than the atlas size gets an atlas of its own size;
-        // the next layer starts a regular one.
-        let (slots, atlases) = pack(&[600, 10], 512, 2);
-        assert_eq!(atlases[0], (604, 604));
-        assert_eq!((slots[1].atlas, atlases[1].0), (1, 512));
-    }
+    use crate::scene::glb::{self, GlbBuilder, Node};
+    use crate::scene::material::Material;
+    use serde_json::json;
 
     #[test]
     fn dilation_colours_transparent_neighbours_only() {

@@ -55,6 +55,10 @@ pub struct SceneGeometry {
     pub textures: Vec<Texture>,
     /// Number of objects (nodes with a mesh), as in the scene.
     pub objects: usize,
+    /// Per object, the index of its node in the glTF file it was loaded
+    /// from (objects are the scene walk's mesh nodes, which need not be in
+    /// node order); empty when the geometry was not loaded from glTF.
+    pub object_nodes: Vec<u32>,
 }
 
 /// One triangle primitive in its local space.
@@ -267,6 +271,7 @@ fn load_inner(bytes: &[u8], source: &str, base_dir: Option<&Path>) -> Result<Sce
         materials,
         textures,
         objects: scene_instances.len(),
+        object_nodes: scene_instances.iter().map(|i| i.node as u32).collect(),
     })
 }
 

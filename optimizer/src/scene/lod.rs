@@ -475,6 +475,7 @@ mod tests {
             materials: Vec::new(),
             textures: Vec::new(),
             objects: placed.len(),
+            object_nodes: Vec::new(),
         };
         (Scene { objects }, geom)
     }

@@ -370,6 +370,7 @@ mod tests {
             materials,
             textures: Vec::new(),
             objects,
+            object_nodes: Vec::new(),
         }
     }
 

@@ -38,7 +38,7 @@ mod nodes;
 mod read;
 mod write;
 
-pub(crate) use read::object_extras;
+pub(crate) use read::{object_extras, scene_extras};
 pub use write::encode_png;
 
 use std::collections::BTreeSet;
@@ -254,6 +254,8 @@ pub struct GlbBuilder {
     lod_level: Vec<bool>,
     /// Extensions used so far.
     extensions_used: BTreeSet<String>,
+    /// The scene's `extras`, if set.
+    scene_extras: Option<Value>,
 }
 
 fn bad(what: &str, message: impl Into<String>) -> Error {

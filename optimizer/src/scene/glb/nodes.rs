@@ -190,6 +190,12 @@ impl GlbBuilder {
         Ok(())
     }
 
+    /// Sets the (single) scene's `extras`. They are written only when the
+    /// document has a scene (at least one root node).
+    pub fn set_scene_extras(&mut self, extras: Value) {
+        self.scene_extras = Some(extras);
+    }
+
     /// Number of nodes added so far.
     pub fn node_count(&self) -> usize {
         self.root.nodes.len()

@@ -38,6 +38,32 @@ pub(crate) fn object_extras(bytes: &[u8], source: &str) -> Result<Vec<Option<Val
     })
 }
 
+/// The `extras` of a glTF file's default scene (else its first), `None`
+/// when it has none. Malformed input gives [`Error::BadInput`] naming
+/// `source`.
+pub(crate) fn scene_extras(bytes: &[u8], source: &str) -> Result<Option<Value>> {
+    guarded(source, || {
+        check_glb_header(bytes, source)?;
+        let gltf::Gltf { document, .. } =
+            gltf::Gltf::from_slice_without_validation(bytes).map_err(|e| gltf_error(source, e))?;
+        let mut root = document.into_json();
+        precheck_root(&mut root, source)?;
+        let doc = gltf::Document::from_json(root).map_err(|e| gltf_error(source, e))?;
+        let Some(scene) = doc.default_scene().or_else(|| doc.scenes().next()) else {
+            return Ok(None);
+        };
+        let Some(raw) = &doc.as_json().scenes[scene.index()].extras else {
+            return Ok(None);
+        };
+        serde_json::from_str(raw.get()).map(Some).map_err(|e| {
+            Error::bad(
+                format!("{source}: scene {} extras", scene.index()),
+                format!("unreadable JSON: {e}"),
+            )
+        })
+    })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

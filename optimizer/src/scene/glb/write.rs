@@ -447,7 +447,10 @@ impl GlbBuilder {
             root.scene = Some(gj::Index::new(0));
             root.scenes = vec![gj::Scene {
                 extensions: None,
-                extras: None,
+                // `gltf-json` keeps extras as raw JSON text.
+                extras: self.scene_extras.as_ref().map(|e| {
+                    serde_json::value::to_raw_value(e).expect("a JSON value always serializes")
+                }),
                 name: None,
                 nodes: roots.into_iter().map(gj::Index::new).collect(),
             }];
