@@ -7,7 +7,7 @@ use crate::util::*;
 
 /// Runs the Khronos validator (installed by the README's test command with
 /// `npm ci --prefix tools/gltf-validator`) and returns its issues report.
-fn validate(glb: &std::path::Path) -> serde_json::Value {
+pub(crate) fn validate(glb: &std::path::Path) -> serde_json::Value {
     let tool = root().join("tools/gltf-validator");
     assert!(
         tool.join("node_modules/gltf-validator").is_dir(),

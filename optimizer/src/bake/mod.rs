@@ -17,6 +17,10 @@
 //! their covered neighbours so that filtering does not darken silhouettes.
 //! Layers without any covered texel are not written.
 
+mod atlas;
+pub mod ktx2;
+pub mod mips;
+
 use std::collections::BTreeMap;
 
 use glam::{DAffine3, DVec3, Vec2, Vec3};
@@ -25,6 +29,7 @@ use serde::Serialize;
 use serde_json::json;
 
 use crate::api::job::MemoryParams;
+use crate::api::texture_format::TextureFormat;
 use crate::api::placement::{PlacedImpostor, Placement};
 use crate::input::Prepared;
 use crate::model::layers::slabs;
@@ -42,13 +47,19 @@ pub struct BakeOptions {
     pub atlas_size: u32,
     /// Gutter around each layer in an atlas, texels.
     pub gutter: u32,
+    /// How atlases are written (PNG, or KTX2 with a coverage-keeping mip chain).
+    pub textures: TextureFormat,
 }
+
+/// The alpha cutoff of the baked materials (`AlphaMode::Mask`).
+pub const ALPHA_CUTOFF: f32 = 0.5;
 
 impl Default for BakeOptions {
     fn default() -> Self {
         BakeOptions {
             atlas_size: 4096,
             gutter: 4,
+            textures: TextureFormat::Png,
         }
     }
 }
@@ -66,8 +77,13 @@ pub struct BakeReport {
     pub atlases: u64,
     /// Texels of the written layers.
     pub texels: u64,
-    /// Memory of the written layers under the job's memory model, bytes.
+    /// Memory of the written layers under the job's memory model in the
+    /// baked texture format (see `MemoryParams::baked_texel_bytes`), bytes.
     pub memory_bytes: u64,
+    /// The format the atlases were written in.
+    pub texture_format: TextureFormat,
+    /// Bytes of the atlas files in the GLB.
+    pub texture_bytes: u64,
     /// The placement's memory estimate, bytes.
     pub placement_memory_bytes: u64,
     /// Atlas texels including gutters and unused space.
@@ -538,7 +554,8 @@ pub fn bake(
     let layers = render_layers(scene, geom, placement, source)?;
 
     let sizes: Vec<u32> = layers.iter().map(|l| l.res).collect();
-    let (slots, atlas_sizes) = pack(&sizes, opts.atlas_size, opts.gutter);
+    let (slots, mut atlas_sizes) = pack(&sizes, opts.atlas_size, opts.gutter);
+    atlas::fit_sizes(&mut atlas_sizes, opts.textures);
     let mut atlases: Vec<Vec<u8>> = atlas_sizes
         .iter()
         .map(|&(w, h)| vec![0u8; w as usize * h as usize * 4])
@@ -547,24 +564,21 @@ pub fn bake(
         let aw = atlas_sizes[s.atlas as usize].0;
         blit(&mut atlases[s.atlas as usize], aw, l, *s, opts.gutter);
     }
-    let pngs: Vec<Vec<u8>> = atlases
-        .par_iter()
-        .zip(&atlas_sizes)
-        .map(|(a, &(w, h))| encode_png(a, w, h))
-        .collect::<Result<_>>()?;
+    let files = atlas::encode_atlases(&atlases, &atlas_sizes, opts.textures)?;
 
     let mut b = GlbBuilder::new();
     let sampler = b.add_sampler(&Sampler {
         min_filter: MinFilter::LinearMipmapLinear,
         ..Sampler::linear_clamp()
     })?;
-    let mut materials = Vec::with_capacity(pngs.len());
-    for (i, png) in pngs.iter().enumerate() {
-        let image = b.add_image_png(&format!("atlas {i}"), png)?;
-        let texture = b.add_texture(image, Some(sampler))?;
+    let mut materials = Vec::with_capacity(files.len());
+    for (i, file) in files.iter().enumerate() {
+        let texture = atlas::add_atlas(&mut b, &format!("atlas {i}"), file, opts.textures, sampler)?;
         let mut m = Material::new(format!("impostor atlas {i}"), [1.0; 4]);
         m.base_color_texture = Some(texture);
-        m.alpha_mode = AlphaMode::Mask { cutoff: 0.5 };
+        m.alpha_mode = AlphaMode::Mask {
+            cutoff: ALPHA_CUTOFF,
+        };
         m.double_sided = true;
         m.unlit = true;
         materials.push(b.add_material(&m)?);
@@ -625,7 +639,8 @@ pub fn bake(
             *t += u64::from(l.res).pow(2);
         }
     }
-    let bytes = |texels: u64| (texels as f64 * memory.bytes_per_texel * mip).ceil() as u64;
+    let bpt = memory.baked_texel_bytes(opts.textures);
+    let bytes = |texels: u64| (texels as f64 * bpt * mip).ceil() as u64;
     let report = BakeReport {
         impostors: placement.impostors.len() as u64,
         layers: placement
@@ -637,6 +652,8 @@ pub fn bake(
         atlases: atlas_sizes.len() as u64,
         texels,
         memory_bytes: bytes(texels),
+        texture_format: opts.textures,
+        texture_bytes: files.iter().map(|f| f.len() as u64).sum(),
         placement_memory_bytes: placement.summary.memory_bytes,
         atlas_texels: atlas_sizes
             .iter()

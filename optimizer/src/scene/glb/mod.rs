@@ -34,6 +34,7 @@
 //! ([`crate::scene::gltf_load`]); `object_extras` reads the node `extras`
 //! that the writer attaches to objects.
 
+mod basisu;
 mod nodes;
 mod read;
 mod write;
@@ -253,6 +254,8 @@ pub struct GlbBuilder {
     lod_level: Vec<bool>,
     /// Extensions used so far.
     extensions_used: BTreeSet<String>,
+    /// Extensions a reader must support (a subset of `extensions_used`).
+    extensions_required: BTreeSet<String>,
 }
 
 fn bad(what: &str, message: impl Into<String>) -> Error {
