@@ -71,10 +71,22 @@ fn ktx2_bake_validates_and_decodes_to_the_png_atlases() {
 
     // The memory model: UASTC is 1 GPU byte per texel, RGBA8 4.
     let (png, ktx) = (read_json(&png_rep), read_json(&ktx_rep));
-    assert_eq!((png["texture_format"].as_str(), ktx["texture_format"].as_str()), (Some("png"), Some("ktx2")));
+    assert_eq!(
+        (
+            png["texture_format"].as_str(),
+            ktx["texture_format"].as_str()
+        ),
+        (Some("png"), Some("ktx2"))
+    );
     assert_eq!(png["texels"], ktx["texels"]);
-    let (pm, km) = (png["memory_bytes"].as_u64().unwrap(), ktx["memory_bytes"].as_u64().unwrap());
-    assert!(km > 0 && pm.abs_diff(4 * km) <= 4, "png {pm} B, ktx2 {km} B");
+    let (pm, km) = (
+        png["memory_bytes"].as_u64().unwrap(),
+        ktx["memory_bytes"].as_u64().unwrap(),
+    );
+    assert!(
+        km > 0 && pm.abs_diff(4 * km) <= 4,
+        "png {pm} B, ktx2 {km} B"
+    );
 
     // The Khronos validator accepts the file.
     let issues = crate::bake::validate(&ktx_glb);
@@ -83,8 +95,16 @@ fn ktx2_bake_validates_and_decodes_to_the_png_atlases() {
     // The document: KTX2 images behind a required KHR_texture_basisu.
     let bytes = std::fs::read(&ktx_glb).unwrap();
     let (doc, bin) = glb_parts(&bytes);
-    assert_eq!(doc["extensionsRequired"], serde_json::json!(["KHR_texture_basisu"]));
-    assert!(doc["extensionsUsed"].as_array().unwrap().contains(&"KHR_texture_basisu".into()));
+    assert_eq!(
+        doc["extensionsRequired"],
+        serde_json::json!(["KHR_texture_basisu"])
+    );
+    assert!(
+        doc["extensionsUsed"]
+            .as_array()
+            .unwrap()
+            .contains(&"KHR_texture_basisu".into())
+    );
     let textures = doc["textures"].as_array().unwrap();
     assert_eq!(textures.len() as u64, ktx["atlases"].as_u64().unwrap());
 
@@ -110,7 +130,10 @@ fn ktx2_bake_validates_and_decodes_to_the_png_atlases() {
         assert_eq!((h.pixel_width, h.pixel_height), (atlas.width, atlas.height));
         assert_eq!(r.color_model(), Some(ktx2::ColorModel::UASTC));
         // A full chain down to 1 × 1.
-        assert_eq!(h.level_count, 32 - atlas.width.max(atlas.height).leading_zeros());
+        assert_eq!(
+            h.level_count,
+            32 - atlas.width.max(atlas.height).leading_zeros()
+        );
         let levels: Vec<_> = r.levels().collect();
         let level0 = decode_uastc(levels[0].data, h.pixel_width, h.pixel_height).unwrap();
         // UASTC keeps about 45 dB on these atlases; 35 dB is well above
@@ -119,8 +142,17 @@ fn ktx2_bake_validates_and_decodes_to_the_png_atlases() {
         let q = psnr(&level0, &atlas.rgba);
         assert!(q > 35.0, "atlas {i}: {q:.1} dB");
         let row = (atlas.width * 4) as usize;
-        let flipped: Vec<u8> = atlas.rgba.chunks_exact(row).rev().flatten().copied().collect();
-        assert!(psnr(&level0, &flipped) < 25.0, "the control matches: the check proves nothing");
+        let flipped: Vec<u8> = atlas
+            .rgba
+            .chunks_exact(row)
+            .rev()
+            .flatten()
+            .copied()
+            .collect();
+        assert!(
+            psnr(&level0, &flipped) < 25.0,
+            "the control matches: the check proves nothing"
+        );
         // Alpha coverage holds down the chain (levels down to 64 texels wide).
         let c0 = coverage(&atlas.rgba, 0.5);
         for (k, l) in levels.iter().enumerate().skip(1) {
@@ -129,7 +161,10 @@ fn ktx2_bake_validates_and_decodes_to_the_png_atlases() {
                 break;
             }
             let c = coverage(&decode_uastc(l.data, w, hh).unwrap(), 0.5);
-            assert!((c - c0).abs() <= 0.05 * c0 + 1e-3, "atlas {i} level {k}: coverage {c} vs {c0}");
+            assert!(
+                (c - c0).abs() <= 0.05 * c0 + 1e-3,
+                "atlas {i} level {k}: coverage {c} vs {c0}"
+            );
         }
     }
 
@@ -140,7 +175,18 @@ fn ktx2_bake_validates_and_decodes_to_the_png_atlases() {
     assert_same_file(&ktx_glb, &again);
 
     // A bad format is a clear error.
-    let o = bake_as(&city, &p, &job, &dir.join("x.glb"), &dir.join("x.json"), "dds");
+    let o = bake_as(
+        &city,
+        &p,
+        &job,
+        &dir.join("x.glb"),
+        &dir.join("x.json"),
+        "dds",
+    );
     assert_eq!(code(&o), 2, "{}", stderr(&o));
-    assert!(stderr(&o).contains("dds") && stderr(&o).contains("png or ktx2"), "{}", stderr(&o));
+    assert!(
+        stderr(&o).contains("dds") && stderr(&o).contains("png or ktx2"),
+        "{}",
+        stderr(&o)
+    );
 }

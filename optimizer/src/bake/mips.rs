@@ -9,7 +9,9 @@
 //! alpha is then scaled so that the share of texels passing the cutoff
 //! equals level 0's: the scale is found by bisection, coverage being
 //! monotone in it (Castaño's alpha-to-coverage-preserving mipmaps). Levels
-//! are filtered from the unscaled previous level, so scales do not compound.
+//! are filtered from the unscaled previous level, so scales do not compound,
+//! and scaled alpha is rounded with a 4 × 4 ordered dither of under one
+//! step, so that texels of equal alpha need not pass or fail together.
 
 use crate::render::raster::{linear_to_srgb8, srgb8_to_linear};
 
@@ -112,12 +114,18 @@ impl Linear {
         }
     }
 
-    /// The level as RGBA8 with every alpha multiplied by `scale`.
-    fn to_level(&self, scale: f32) -> MipLevel {
+    /// The level as RGBA8 with every alpha multiplied by `scale`, rounded
+    /// with `dither` (or to nearest).
+    fn to_level(&self, scale: f32, dither: bool) -> MipLevel {
         let mut rgba = Vec::with_capacity(self.px.len() * 4);
-        for p in &self.px {
+        for (i, p) in self.px.iter().enumerate() {
             rgba.extend([p[0], p[1], p[2]].map(linear_to_srgb8));
-            rgba.push(alpha_byte(p[3], scale));
+            let d = if dither {
+                bayer(i as u32 % self.width, i as u32 / self.width)
+            } else {
+                0.0
+            };
+            rgba.push(alpha_byte(p[3], scale, d));
         }
         MipLevel {
             width: self.width,
@@ -127,9 +135,19 @@ impl Linear {
     }
 }
 
-/// An alpha in [0, 255] times `scale`, rounded and clamped to a byte.
-fn alpha_byte(alpha: f32, scale: f32) -> u8 {
-    (alpha * scale).round().clamp(0.0, 255.0) as u8
+/// An alpha in [0, 255] times `scale`, offset by `dither` (less than half
+/// a step either way), rounded and clamped to a byte.
+fn alpha_byte(alpha: f32, scale: f32, dither: f32) -> u8 {
+    (alpha * scale + dither).round().clamp(0.0, 255.0) as u8
+}
+
+/// The 4 × 4 ordered-dither offset of texel `(x, y)`, in (−0.5, 0.5).
+/// Filtered thin features give many texels the very same alpha, which one
+/// scale can only keep or drop together; offsets below one alpha step let
+/// the coverage search keep a share of them.
+fn bayer(x: u32, y: u32) -> f32 {
+    const M: [[u8; 4]; 4] = [[0, 8, 2, 10], [12, 4, 14, 6], [3, 11, 1, 9], [15, 7, 13, 5]];
+    (f32::from(M[(y % 4) as usize][(x % 4) as usize]) + 0.5) / 16.0 - 0.5
 }
 
 /// One box-filter step of an RGBA8 level (colour in linear light weighted
@@ -137,19 +155,25 @@ fn alpha_byte(alpha: f32, scale: f32) -> u8 {
 pub fn downsample(level: &MipLevel) -> MipLevel {
     Linear::from_rgba(&level.rgba, level.width, level.height)
         .down()
-        .to_level(1.0)
+        .to_level(1.0, false)
 }
 
 /// The alpha scale of a level whose coverage at `cutoff` is closest to
 /// `target`, found by bisection (coverage grows with the scale); 1 when the
 /// unscaled level is as close.
-fn coverage_scale(alphas: &[f32], cutoff: f32, target: f64) -> f32 {
+fn coverage_scale(level: &Linear, cutoff: f32, target: f64) -> f32 {
     let min = alpha_threshold(cutoff);
-    let n = alphas.len().max(1) as f64;
+    let n = level.px.len().max(1) as f64;
+    let w = level.width;
     let cov = |s: f32| {
-        alphas
+        level
+            .px
             .iter()
-            .filter(|&&a| u16::from(alpha_byte(a, s)) >= min)
+            .enumerate()
+            .filter(|&(i, p)| {
+                let d = bayer(i as u32 % w, i as u32 / w);
+                u16::from(alpha_byte(p[3], s, d)) >= min
+            })
             .count() as f64
             / n
     };
@@ -189,13 +213,11 @@ pub fn mip_chain(
     }];
     for _ in 1..level_count(width, height) {
         filtered = filtered.down();
-        let scale = if keep_coverage {
-            let alphas: Vec<f32> = filtered.px.iter().map(|p| p[3]).collect();
-            coverage_scale(&alphas, cutoff, target)
+        out.push(if keep_coverage {
+            filtered.to_level(coverage_scale(&filtered, cutoff, target), true)
         } else {
-            1.0
-        };
-        out.push(filtered.to_level(scale));
+            filtered.to_level(1.0, false)
+        });
     }
     out
 }
