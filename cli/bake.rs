@@ -61,10 +61,7 @@ pub fn run(a: BakeArgs) -> Result<ExitCode> {
         &memory,
         &p,
         &BakeOptions {
-            textures: a
-                .textures
-                .or(memory.texture_format)
-                .unwrap_or_default(),
+            textures: a.textures.or(memory.texture_format).unwrap_or_default(),
             ..BakeOptions::default()
         },
         &a.placement.display().to_string(),

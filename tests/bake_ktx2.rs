@@ -91,6 +91,19 @@ fn ktx2_bake_validates_and_decodes_to_the_png_atlases() {
     // The Khronos validator accepts the file.
     let issues = crate::bake::validate(&ktx_glb);
     assert_eq!(issues["numErrors"], 0, "{issues}");
+    // Its 2.0.0-dev.3.10 does not know KHR_texture_basisu: it warns only
+    // that it cannot read the KTX2 images (so the decoding below is the
+    // check of their content), nothing else.
+    for m in issues["messages"].as_array().unwrap() {
+        if m["severity"].as_u64() <= Some(1) {
+            let code = m["code"].as_str().unwrap();
+            assert!(
+                ["VALUE_NOT_IN_LIST", "IMAGE_UNRECOGNIZED_FORMAT"].contains(&code)
+                    && m["pointer"].as_str().unwrap().starts_with("/images/"),
+                "{m}"
+            );
+        }
+    }
 
     // The document: KTX2 images behind a required KHR_texture_basisu.
     let bytes = std::fs::read(&ktx_glb).unwrap();

@@ -96,7 +96,11 @@ mod tests {
         // A job without the field reads and writes as before.
         let j: MemoryParams = serde_json::from_str("{}").unwrap();
         assert_eq!(j.texture_format, None);
-        assert!(!serde_json::to_string(&j).unwrap().contains("texture_format"));
+        assert!(
+            !serde_json::to_string(&j)
+                .unwrap()
+                .contains("texture_format")
+        );
         let j: MemoryParams = serde_json::from_str(r#"{"texture_format": "ktx2"}"#).unwrap();
         assert_eq!(j.texture_format, Some(TextureFormat::Ktx2));
         assert!(serde_json::from_str::<MemoryParams>(r#"{"texture_format": "dds"}"#).is_err());

@@ -40,7 +40,10 @@ pub fn coverage(rgba: &[u8], cutoff: f32) -> f64 {
         return 0.0;
     }
     let min = alpha_threshold(cutoff);
-    let passing = rgba.chunks_exact(4).filter(|p| u16::from(p[3]) >= min).count();
+    let passing = rgba
+        .chunks_exact(4)
+        .filter(|p| u16::from(p[3]) >= min)
+        .count();
     passing as f64 / n as f64
 }
 

@@ -29,8 +29,8 @@ use serde::Serialize;
 use serde_json::json;
 
 use crate::api::job::MemoryParams;
-use crate::api::texture_format::TextureFormat;
 use crate::api::placement::{PlacedImpostor, Placement};
+use crate::api::texture_format::TextureFormat;
 use crate::input::Prepared;
 use crate::model::layers::slabs;
 use crate::render::raster::{Raster, Surface, TextureRef, Vertex, View};
@@ -573,7 +573,8 @@ pub fn bake(
     })?;
     let mut materials = Vec::with_capacity(files.len());
     for (i, file) in files.iter().enumerate() {
-        let texture = atlas::add_atlas(&mut b, &format!("atlas {i}"), file, opts.textures, sampler)?;
+        let texture =
+            atlas::add_atlas(&mut b, &format!("atlas {i}"), file, opts.textures, sampler)?;
         let mut m = Material::new(format!("impostor atlas {i}"), [1.0; 4]);
         m.base_color_texture = Some(texture);
         m.alpha_mode = AlphaMode::Mask {

@@ -43,11 +43,11 @@ impl GlbBuilder {
     /// [`GlbBuilder::add_image_ktx2`]) with an optional sampler and returns
     /// its index.
     pub fn add_texture_basisu(&mut self, image: u32, sampler: Option<u32>) -> Result<u32> {
-        let is_ktx2 = self.root.images.get(image as usize).is_some_and(|i| {
-            i.mime_type
-                .as_ref()
-                .is_some_and(|m| m.0 == "image/ktx2")
-        });
+        let is_ktx2 = self
+            .root
+            .images
+            .get(image as usize)
+            .is_some_and(|i| i.mime_type.as_ref().is_some_and(|m| m.0 == "image/ktx2"));
         if !is_ktx2 {
             return Err(bad("texture", format!("image {image} is not a KTX2 image")));
         }
@@ -92,7 +92,10 @@ mod tests {
         let j = b.json();
         assert_eq!(j["images"][0]["mimeType"], "image/ktx2");
         assert!(j["textures"][0].get("source").is_none(), "{j}");
-        assert_eq!(j["textures"][0]["extensions"][BASISU_EXTENSION]["source"], 0);
+        assert_eq!(
+            j["textures"][0]["extensions"][BASISU_EXTENSION]["source"],
+            0
+        );
         assert_eq!(j["extensionsUsed"], json!([BASISU_EXTENSION]));
         assert_eq!(j["extensionsRequired"], json!([BASISU_EXTENSION]));
         // A PNG image cannot be a basisu texture, nor PNG bytes a KTX2 image.
