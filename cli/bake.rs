@@ -54,6 +54,7 @@ pub fn run(a: BakeArgs) -> Result<ExitCode> {
     let p = read_placement(&a.placement)?;
     let scene = optimizer::scene::gltf_load::load_scene_file(&a.scene)?;
     let geom = geometry::load_geometry_file(&a.scene)?;
+    let defaults = BakeOptions::for_memory(&memory);
     let start = std::time::Instant::now();
     let (glb, rep) = bake::bake(
         &scene,
@@ -61,8 +62,8 @@ pub fn run(a: BakeArgs) -> Result<ExitCode> {
         &memory,
         &p,
         &BakeOptions {
-            textures: a.textures.or(memory.texture_format).unwrap_or_default(),
-            ..BakeOptions::default()
+            textures: a.textures.unwrap_or(defaults.textures),
+            ..defaults
         },
         &a.placement.display().to_string(),
     )?;

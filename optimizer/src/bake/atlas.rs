@@ -6,10 +6,23 @@ use rayon::prelude::*;
 
 use super::ktx2::encode_ktx2;
 use super::mips::mip_chain;
-use super::{ALPHA_CUTOFF, encode_png};
+use super::{ALPHA_CUTOFF, BakeOptions, encode_png};
 use crate::Result;
+use crate::api::job::MemoryParams;
 use crate::api::texture_format::TextureFormat;
 use crate::scene::glb::GlbBuilder;
+
+impl BakeOptions {
+    /// The default options, with atlases in the format the memory model
+    /// names (`memory.texture_format`; PNG when it names none), so that the
+    /// bake writes what the placement's estimate counted.
+    pub fn for_memory(memory: &MemoryParams) -> Self {
+        BakeOptions {
+            textures: memory.texture_format.unwrap_or_default(),
+            ..BakeOptions::default()
+        }
+    }
+}
 
 /// Rounds atlas sizes up to what `format` needs: KTX2 (UASTC) wants both
 /// sides multiples of 4 (heights already are).
@@ -55,5 +68,23 @@ pub(crate) fn add_atlas(
             let image = b.add_image_ktx2(name, file)?;
             b.add_texture_basisu(image, Some(sampler))
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn options_follow_the_memory_model_and_ktx2_sizes_are_whole_blocks() {
+        let mut m = MemoryParams::default();
+        assert_eq!(BakeOptions::for_memory(&m).textures, TextureFormat::Png);
+        m.texture_format = Some(TextureFormat::Ktx2);
+        assert_eq!(BakeOptions::for_memory(&m).textures, TextureFormat::Ktx2);
+        let mut sizes = [(606, 604), (4096, 12)];
+        fit_sizes(&mut sizes, TextureFormat::Png);
+        assert_eq!(sizes, [(606, 604), (4096, 12)]);
+        fit_sizes(&mut sizes, TextureFormat::Ktx2);
+        assert_eq!(sizes, [(608, 604), (4096, 12)]);
     }
 }

@@ -359,7 +359,7 @@ mod tests {
         assert_eq!(level_count(1, 1), 1);
         assert_eq!(level_count(4096, 1024), 13);
         assert_eq!(level_count(600, 12), 10);
-        let chain = mip_chain(&vec![255; 6 * 3 * 4], 6, 3, 0.5, true);
+        let chain = mip_chain(&[255; 6 * 3 * 4], 6, 3, 0.5, true);
         let sizes: Vec<(u32, u32)> = chain.iter().map(|l| (l.width, l.height)).collect();
         assert_eq!(sizes, vec![(6, 3), (3, 1), (1, 1)]);
         // Fully opaque stays fully opaque, scale or not.
