@@ -6,6 +6,7 @@ use std::process::ExitCode;
 use clap::Args;
 use optimizer::Result;
 use optimizer::api::job::MemoryParams;
+use optimizer::api::texture_format::TextureFormat;
 use optimizer::bake::{self, BakeOptions};
 use optimizer::scene::geometry;
 
@@ -31,9 +32,18 @@ pub struct BakeArgs {
     /// Write the bake report (layers, atlases, texels, memory) to this JSON file.
     #[arg(long)]
     report: Option<PathBuf>,
+    /// Atlas texture format: png, or ktx2 (Basis Universal UASTC with a
+    /// coverage-keeping mip chain, `KHR_texture_basisu`; 1 GPU byte per
+    /// texel). Default: the job's `memory.texture_format`, else png.
+    #[arg(long, value_parser = parse_texture_format)]
+    textures: Option<TextureFormat>,
     /// Worker threads (default: all cores).
     #[arg(long)]
     threads: Option<usize>,
+}
+
+fn parse_texture_format(s: &str) -> std::result::Result<TextureFormat, String> {
+    s.parse()
 }
 
 pub fn run(a: BakeArgs) -> Result<ExitCode> {
@@ -45,6 +55,7 @@ pub fn run(a: BakeArgs) -> Result<ExitCode> {
     let p = read_placement(&a.placement)?;
     let scene = optimizer::scene::gltf_load::load_scene_file(&a.scene)?;
     let geom = geometry::load_geometry_file(&a.scene)?;
+    let defaults = BakeOptions::for_memory(&memory);
     let start = std::time::Instant::now();
     let (glb, rep) = bake::bake(
         &scene,
@@ -52,7 +63,10 @@ pub fn run(a: BakeArgs) -> Result<ExitCode> {
         &memory,
         job.as_ref().map(|j| &j.view_space),
         &p,
-        &BakeOptions::default(),
+        &BakeOptions {
+            textures: a.textures.unwrap_or(defaults.textures),
+            ..defaults
+        },
         &a.placement.display().to_string(),
     )?;
     write_output(Some(&a.out), &glb)?;
@@ -60,12 +74,14 @@ pub fn run(a: BakeArgs) -> Result<ExitCode> {
         write_json(Some(r), &rep)?;
     }
     eprintln!(
-        "{} impostors, {} of {} layers written, {} atlases, {} texels, {:.3} MB baked \
-         (placement estimate {:.3} MB), {:.1} s",
+        "{} impostors, {} of {} layers written, {} {} atlases ({:.3} MB), {} texels, \
+         {:.3} MB baked (placement estimate {:.3} MB), {:.1} s",
         rep.impostors,
         rep.layers_written,
         rep.layers,
         rep.atlases,
+        rep.texture_format,
+        rep.texture_bytes as f64 / 1e6,
         rep.texels,
         rep.memory_bytes as f64 / 1e6,
         rep.placement_memory_bytes as f64 / 1e6,

@@ -4,6 +4,7 @@
 mod architecture;
 mod bad_input;
 mod bake;
+mod bake_ktx2;
 mod cli;
 mod corpus;
 mod fuzz;

@@ -279,7 +279,10 @@ fn finish_run(
     // the placement's estimate.
     let glb = if opts.bake {
         ctl.progress("bake", 0.99, "baking the impostors");
-        let glb = out.bake(prepared, &optimizer::bake::BakeOptions::default())?;
+        let glb = out.bake(
+            prepared,
+            &optimizer::bake::BakeOptions::for_memory(&prepared.job().memory),
+        )?;
         // The bake does not stop part-way: a cancel during it is honoured
         // here (and by the worker, which ends a cancelled job `cancelled`).
         ctl.check()?;

@@ -10,3 +10,4 @@ pub mod pvs;
 pub mod scene;
 pub mod schema;
 pub mod stats;
+pub mod texture_format;

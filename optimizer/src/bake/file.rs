@@ -5,20 +5,23 @@
 use glam::Vec3;
 use serde_json::{Value, json};
 
-use super::Layer;
 use super::atlas::Slot;
+use super::formats::add_atlas;
+use super::{ALPHA_CUTOFF, Layer};
 use crate::api::baked::{BakedImpostor, BakedScene};
 use crate::api::job::ViewSpace;
 use crate::api::placement::Placement;
+use crate::api::texture_format::TextureFormat;
 use crate::model::layers::slabs;
 use crate::scene::glb::{self, GlbBuilder, MeshPrimitive, MinFilter, Node, Sampler, object_extras};
 use crate::scene::material::{AlphaMode, Material};
 use crate::{Error, Result};
 
-/// The atlases of a bake: PNG bytes and size of each.
+/// The atlases of a bake: the encoded file (in `format`) and size of each.
 pub(super) struct Atlases<'a> {
-    pub(super) pngs: &'a [Vec<u8>],
+    pub(super) files: &'a [Vec<u8>],
     pub(super) sizes: &'a [(u32, u32)],
+    pub(super) format: TextureFormat,
 }
 
 /// Writes the GLB of `layers` (in impostor, then layer order) placed at
@@ -37,13 +40,14 @@ pub(super) fn write(
         min_filter: MinFilter::LinearMipmapLinear,
         ..Sampler::linear_clamp()
     })?;
-    let mut materials = Vec::with_capacity(atlases.pngs.len());
-    for (i, png) in atlases.pngs.iter().enumerate() {
-        let image = b.add_image_png(&format!("atlas {i}"), png)?;
-        let texture = b.add_texture(image, Some(sampler))?;
+    let mut materials = Vec::with_capacity(atlases.files.len());
+    for (i, file) in atlases.files.iter().enumerate() {
+        let texture = add_atlas(&mut b, &format!("atlas {i}"), file, atlases.format, sampler)?;
         let mut m = Material::new(format!("impostor atlas {i}"), [1.0; 4]);
         m.base_color_texture = Some(texture);
-        m.alpha_mode = AlphaMode::Mask { cutoff: 0.5 };
+        m.alpha_mode = AlphaMode::Mask {
+            cutoff: ALPHA_CUTOFF,
+        };
         m.double_sided = true;
         m.unlit = true;
         materials.push(b.add_material(&m)?);

@@ -21,6 +21,9 @@
 
 mod atlas;
 mod file;
+mod formats;
+pub mod ktx2;
+pub mod mips;
 
 pub use file::read_layers;
 
@@ -32,6 +35,7 @@ use serde::Serialize;
 
 use crate::api::job::{MemoryParams, ViewSpace};
 use crate::api::placement::{PlacedImpostor, Placement};
+use crate::api::texture_format::TextureFormat;
 use crate::input::Prepared;
 use crate::model::layers::slabs;
 use crate::render::raster::{Raster, Surface, TextureRef, Vertex, View};
@@ -48,13 +52,19 @@ pub struct BakeOptions {
     pub atlas_size: u32,
     /// Gutter around each layer in an atlas, texels.
     pub gutter: u32,
+    /// How atlases are written (PNG, or KTX2 with a coverage-keeping mip chain).
+    pub textures: TextureFormat,
 }
+
+/// The alpha cutoff of the baked materials (`AlphaMode::Mask`).
+pub const ALPHA_CUTOFF: f32 = 0.5;
 
 impl Default for BakeOptions {
     fn default() -> Self {
         BakeOptions {
             atlas_size: 4096,
             gutter: 4,
+            textures: TextureFormat::Png,
         }
     }
 }
@@ -72,8 +82,13 @@ pub struct BakeReport {
     pub atlases: u64,
     /// Texels of the written layers.
     pub texels: u64,
-    /// Memory of the written layers under the job's memory model, bytes.
+    /// Memory of the written layers under the job's memory model in the
+    /// baked texture format (see `MemoryParams::baked_texel_bytes`), bytes.
     pub memory_bytes: u64,
+    /// The format the atlases were written in.
+    pub texture_format: TextureFormat,
+    /// Bytes of the atlas files in the GLB.
+    pub texture_bytes: u64,
     /// The placement's memory estimate, bytes.
     pub placement_memory_bytes: u64,
     /// Atlas texels including gutters and unused space.
@@ -359,10 +374,21 @@ pub(crate) fn geom_objects(geom: &SceneGeometry) -> Vec<Vec<u32>> {
 /// Width and height of each atlas, texels.
 pub type AtlasSizes = Vec<(u32, u32)>;
 
+/// A baked GLB as [`write_glb`] writes it.
+#[derive(Debug)]
+pub struct BakedGlb {
+    /// The file.
+    pub glb: Vec<u8>,
+    /// Each atlas's size.
+    pub atlas_sizes: AtlasSizes,
+    /// Bytes of the encoded atlas files (PNG or KTX2) in it.
+    pub texture_bytes: u64,
+}
+
 /// Writes `layers` (of `placement`'s impostors, in impostor then layer
 /// order, as [`render_layers`] gives them) as a baked GLB: the layers
 /// packed into atlases, one node and primitive per impostor. Returns the
-/// file and each atlas's size. `object_nodes` are the glTF node indices of
+/// file, each atlas's size and the atlas files' bytes. `object_nodes` are the glTF node indices of
 /// the scene's objects (empty when unknown).
 pub fn write_glb(
     placement: &Placement,
@@ -370,7 +396,7 @@ pub fn write_glb(
     object_nodes: &[u32],
     view_space: Option<&ViewSpace>,
     opts: &BakeOptions,
-) -> Result<(Vec<u8>, AtlasSizes)> {
+) -> Result<BakedGlb> {
     if let Some(l) = layers
         .iter()
         .find(|l| placement.impostors.get(l.impostor as usize).is_none())
@@ -392,7 +418,8 @@ pub fn write_glb(
             }),
         }
     }
-    let (group_slots, atlas_sizes) = atlas::pack(&groups, opts.atlas_size, opts.gutter);
+    let (group_slots, mut atlas_sizes) = atlas::pack(&groups, opts.atlas_size, opts.gutter);
+    formats::fit_sizes(&mut atlas_sizes, opts.textures);
     let slots: Vec<Slot> = group_slots.into_iter().flatten().collect();
     let mut atlases: Vec<Vec<u8>> = atlas_sizes
         .iter()
@@ -402,23 +429,24 @@ pub fn write_glb(
         let aw = atlas_sizes[s.atlas as usize].0;
         atlas::blit(&mut atlases[s.atlas as usize], aw, l, *s, opts.gutter);
     }
-    let pngs: Vec<Vec<u8>> = atlases
-        .par_iter()
-        .zip(&atlas_sizes)
-        .map(|(a, &(w, h))| encode_png(a, w, h))
-        .collect::<Result<_>>()?;
+    let files = formats::encode_atlases(&atlases, &atlas_sizes, opts.textures)?;
     let glb = file::write(
         placement,
         layers,
         &slots,
         &file::Atlases {
-            pngs: &pngs,
+            files: &files,
             sizes: &atlas_sizes,
+            format: opts.textures,
         },
         object_nodes,
         view_space,
     )?;
-    Ok((glb, atlas_sizes))
+    Ok(BakedGlb {
+        glb,
+        atlas_sizes,
+        texture_bytes: files.iter().map(|f| f.len() as u64).sum(),
+    })
 }
 
 /// Bakes every impostor of `placement` over `geom` (the geometry of
@@ -439,7 +467,11 @@ pub fn bake(
 ) -> Result<(Vec<u8>, BakeReport)> {
     let layers = render_layers(scene, geom, placement, source)?;
 
-    let (glb, atlas_sizes) = write_glb(placement, &layers, &geom.object_nodes, view_space, opts)?;
+    let BakedGlb {
+        glb,
+        atlas_sizes,
+        texture_bytes,
+    } = write_glb(placement, &layers, &geom.object_nodes, view_space, opts)?;
 
     let texels: u64 = layers.iter().map(|l| u64::from(l.res).pow(2)).sum();
     let mip = if memory.mipmaps { 4.0 / 3.0 } else { 1.0 };
@@ -449,7 +481,8 @@ pub fn bake(
             *t += u64::from(l.res).pow(2);
         }
     }
-    let bytes = |texels: u64| (texels as f64 * memory.bytes_per_texel * mip).ceil() as u64;
+    let bpt = memory.baked_texel_bytes(opts.textures);
+    let bytes = |texels: u64| (texels as f64 * bpt * mip).ceil() as u64;
     let report = BakeReport {
         impostors: placement.impostors.len() as u64,
         layers: placement
@@ -461,6 +494,8 @@ pub fn bake(
         atlases: atlas_sizes.len() as u64,
         texels,
         memory_bytes: bytes(texels),
+        texture_format: opts.textures,
+        texture_bytes,
         placement_memory_bytes: placement.summary.memory_bytes,
         atlas_texels: atlas_sizes
             .iter()

@@ -336,7 +336,7 @@ pub fn export(scene: &Scene, geom: &SceneGeometry, input: &TilesInput<'_>) -> Re
                         Some(&job.view_space),
                         &opts,
                     )?
-                    .0,
+                    .glb,
                 ));
                 Some(Content { uri: name })
             };

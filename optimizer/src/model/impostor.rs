@@ -220,7 +220,7 @@ impl ImpostorModel {
         ImpostorModel {
             theta: job.pixel_angle(),
             eps: job.max_error_px,
-            bytes_per_texel: m.bytes_per_texel * if m.mipmaps { 4.0 / 3.0 } else { 1.0 },
+            bytes_per_texel: m.texel_bytes() * if m.mipmaps { 4.0 / 3.0 } else { 1.0 },
             max_res: m.max_texture_size,
             texels_per_pixel: m.texels_per_pixel,
         }

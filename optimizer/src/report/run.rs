@@ -369,7 +369,10 @@ fn one_run<'a>(
         &Control::default(),
     )?;
     let glb = if extras.bake {
-        Some(out.bake(&prepared, &crate::bake::BakeOptions::default())?)
+        Some(out.bake(
+            &prepared,
+            &crate::bake::BakeOptions::for_memory(&prepared.job().memory),
+        )?)
     } else {
         None
     };

@@ -6,6 +6,7 @@ use glam::DVec3;
 use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 
+use crate::api::texture_format::TextureFormat;
 use crate::math::grid::Grid;
 
 mod methods;
@@ -374,6 +375,13 @@ pub struct MemoryParams {
     /// 2.0 %) at that factor squared in memory.
     #[serde(default = "default_texels_per_pixel")]
     pub texels_per_pixel: f64,
+    /// The format impostor atlases are baked in (`png` or `ktx2`). When
+    /// given, its GPU bytes per texel (png 4, ktx2 1: UASTC as ASTC 4×4 or
+    /// BC7) replace `bytes_per_texel` in the memory model, and `bake` writes
+    /// it by default. Default: none (`bytes_per_texel` counts, `bake`
+    /// writes PNG).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub texture_format: Option<TextureFormat>,
     /// The most impostor memory the placement may use, bytes (`None`: no
     /// limit). The greedy then adds the candidates with the best frame-time
     /// gain per byte that still fit; CPVs it cannot solve within the budget
@@ -537,6 +545,7 @@ impl Default for MemoryParams {
             mipmaps: default_true(),
             max_texture_size: default_max_tex(),
             texels_per_pixel: default_texels_per_pixel(),
+            texture_format: None,
             budget_bytes: None,
         }
     }

@@ -34,6 +34,7 @@
 //! ([`crate::scene::gltf_load`]); `object_extras` reads the node `extras`
 //! that the writer attaches to objects.
 
+mod basisu;
 mod nodes;
 mod read;
 mod write;
@@ -256,6 +257,8 @@ pub struct GlbBuilder {
     extensions_used: BTreeSet<String>,
     /// The scene's `extras`, if set.
     scene_extras: Option<Value>,
+    /// Extensions a reader must support (a subset of `extensions_used`).
+    extensions_required: BTreeSet<String>,
 }
 
 fn bad(what: &str, message: impl Into<String>) -> Error {

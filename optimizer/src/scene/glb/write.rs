@@ -64,7 +64,11 @@ impl GlbBuilder {
 
     /// Appends `bytes` as a buffer view starting at a 4-byte aligned offset and
     /// pads the buffer back to a multiple of 4 with zeros.
-    fn push_view(&mut self, bytes: &[u8], target: Option<gj::buffer::Target>) -> Result<u32> {
+    pub(super) fn push_view(
+        &mut self,
+        bytes: &[u8],
+        target: Option<gj::buffer::Target>,
+    ) -> Result<u32> {
         if self.bin.len() + bytes.len() + 3 > MAX_BIN_BYTES {
             return Err(bad("buffer", "the binary buffer would exceed 3 GiB"));
         }
@@ -440,6 +444,7 @@ impl GlbBuilder {
             ..gj::Asset::default()
         };
         root.extensions_used = self.extensions_used.iter().cloned().collect();
+        root.extensions_required = self.extensions_required.iter().cloned().collect();
         let roots = self.scene_roots();
         // A scene without nodes is legal glTF but rejected by some readers, so an
         // empty document has no scene at all.
