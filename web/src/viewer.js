@@ -157,11 +157,15 @@ class Viewer {
     });
   }
 
-  /// The nodes of each impostor id (`extras.impostor` of the baked GLB).
+  /// The nodes of each impostor id: `extras.impostor` of the baked GLB,
+  /// an object whose `id` is the placement id (`schemas/baked-node.schema.json`),
+  /// or the bare id in files baked before it carried more.
   mapImpostors(gltf) {
     this.impostorNodes = new Map();
     gltf.scene.traverse((o) => {
-      const id = o.userData && o.userData.impostor;
+      const extras = o.userData && o.userData.impostor;
+      if (extras === undefined || extras === null) return;
+      const id = typeof extras === "object" ? extras.id : extras;
       if (id === undefined) return;
       if (!this.impostorNodes.has(id)) this.impostorNodes.set(id, []);
       this.impostorNodes.get(id).push(o);
