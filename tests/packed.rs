@@ -165,3 +165,91 @@ fn gltfpack_output_loads_and_places_like_the_original() {
     }
     assert_eq!(b["summary"]["unsolved_cpvs"], a["summary"]["unsolved_cpvs"]);
 }
+
+/// A real third-party scene (the race-track park of `../shared/scenes/`,
+/// 3,856 named nodes) through `gltfpack` with meshopt compression: without
+/// quantization (`-noq -kn -cc`) it is the same scene object for object and
+/// places byte for byte as the original; quantized (`-kn -cc`) it has the
+/// same objects in the same order, each moved by less than the quantization
+/// step, and a placement within 3 % of the original's.
+#[test]
+fn a_packed_real_scene_places_like_the_original() {
+    let Some(forza) = shared_scene("forza") else {
+        return;
+    };
+    let dir = tmp("packed-forza");
+    let job = root().join("fixtures/jobs/forza.json");
+    let noq = dir.join("noq.glb");
+    let q = dir.join("q.glb");
+    gltfpack(&forza, &noq, &["-noq", "-kn", "-cc"]);
+    gltfpack(&forza, &q, &["-kn", "-cc"]);
+    assert_eq!(
+        glb_json(&noq)["extensionsRequired"],
+        serde_json::json!(["EXT_meshopt_compression"])
+    );
+    assert_eq!(
+        glb_json(&q)["extensionsRequired"],
+        serde_json::json!(["KHR_mesh_quantization", "EXT_meshopt_compression"])
+    );
+    // The compressed files are not the original in disguise.
+    let size = |p: &Path| std::fs::metadata(p).unwrap().len();
+    assert!(
+        size(&q) * 2 < size(&forza),
+        "{} vs {}",
+        size(&q),
+        size(&forza)
+    );
+
+    let load = |p: &Path| optimizer::scene::gltf_load::load_scene_file(p).unwrap();
+    let (orig, s_noq, s_q) = (load(&forza), load(&noq), load(&q));
+    assert_eq!(orig.objects.len(), 3856);
+    let (lo, hi) = orig.bounds();
+    let extent = (hi - lo).max_element();
+    for (packed, tolerance) in [(&s_noq, 1e-4), (&s_q, extent / (1 << 14) as f64)] {
+        assert_eq!(packed.objects.len(), orig.objects.len());
+        for (i, (a, b)) in orig.objects.iter().zip(&packed.objects).enumerate() {
+            // Quantized, each mesh hangs from an unnamed child node of
+            // its named node (the dequantization transform).
+            if std::ptr::eq(packed, &s_noq) {
+                assert_eq!(a.name, b.name, "object {i}");
+            }
+            assert_eq!(
+                (a.triangles, a.draw_calls),
+                (b.triangles, b.draw_calls),
+                "object {i} ({})",
+                a.name
+            );
+            let moved = (a.min - b.min)
+                .abs()
+                .max((a.max - b.max).abs())
+                .max_element();
+            assert!(
+                moved <= tolerance,
+                "object {i} ({}) moved {moved} > {tolerance}",
+                a.name
+            );
+        }
+    }
+    // Placement: byte for byte without quantization, close with it.
+    let placed = |scene: &Path, name: &str| {
+        let out = dir.join(name);
+        let o = place(scene, &job, &out, &[]);
+        assert_eq!(code(&o), 0, "{}: {}", scene.display(), stderr(&o));
+        out
+    };
+    let p_orig = placed(&forza, "p-orig.json");
+    assert_same_file(&p_orig, &placed(&noq, "p-noq.json"));
+    let (a, b) = (read_json(&p_orig), read_json(&placed(&q, "p-q.json")));
+    assert!(a["summary"]["impostors"].as_u64().unwrap() > 100);
+    for key in ["cpvs", "impostors", "memory_bytes"] {
+        let (x, y) = (
+            a["summary"][key].as_f64().unwrap(),
+            b["summary"][key].as_f64().unwrap(),
+        );
+        assert!(
+            (x - y).abs() <= 0.03 * x.max(y),
+            "{key}: {x} original vs {y} quantized"
+        );
+    }
+    assert_eq!(b["summary"]["unsolved_cpvs"], 0);
+}
