@@ -4,6 +4,12 @@
 //
 //   OUTDIR/index.html
 //   OUTDIR/assets/app-HASH.js, OUTDIR/assets/app-HASH.css
+//   OUTDIR/assets/basis-HASH/basis_transcoder.{js,wasm}
+//
+// The Basis Universal transcoder (three.js's copy, which its KTX2Loader
+// loads by these fixed names from a folder) decodes KTX2 impostor atlases
+// in the viewer; its folder is named by the hash of both files and the
+// bundle is told the folder (BASIS_PATH).
 //
 //   node build.mjs OUTDIR
 //
@@ -22,6 +28,13 @@ if (!out) {
   process.exit(2);
 }
 mkdirSync(join(out, "assets"), { recursive: true });
+const basisFrom = join(here, "node_modules", "three", "examples", "jsm", "libs", "basis");
+const basisFiles = ["basis_transcoder.js", "basis_transcoder.wasm"].map((name) => [name, readFileSync(join(basisFrom, name))]);
+const basisHash = createHash("sha256");
+for (const [, data] of basisFiles) basisHash.update(data);
+const basisDir = `assets/basis-${basisHash.digest("hex").slice(0, 16)}/`;
+mkdirSync(join(out, basisDir), { recursive: true });
+for (const [name, data] of basisFiles) writeFileSync(join(out, basisDir, name), data);
 const result = await build({
   entryPoints: { app: join(here, "src", "main.js") },
   bundle: true,
@@ -32,6 +45,7 @@ const result = await build({
   outdir: "bundle",
   write: false,
   logLevel: "warning",
+  define: { BASIS_PATH: JSON.stringify(basisDir) },
 });
 // Named by a hash of their content alone (esbuild's [hash] also depends on
 // where the output goes), so a checkout builds the same names anywhere.

@@ -1,5 +1,6 @@
 //! The web page: `GET /` (the index) and `GET /assets/{file}` (its script
-//! and style sheet), embedded in the binary. `build.rs` bundles `web/`
+//! and style sheet, and the Basis Universal transcoder in a folder of its
+//! own, `assets/basis-HASH/`), embedded in the binary. `build.rs` bundles `web/`
 //! with esbuild into `OUT_DIR/web`; the assets are named by their content's
 //! hash, so they are cached for good while the index is checked each time.
 //! The page talks to the `/v1` API like any client.
@@ -29,6 +30,7 @@ fn content_type(name: &str) -> &'static str {
         Some("json") => "application/json",
         Some("svg") => "image/svg+xml",
         Some("png") => "image/png",
+        Some("wasm") => "application/wasm",
         _ => "application/octet-stream",
     }
 }
@@ -74,10 +76,12 @@ async fn index() -> Response {
 }
 
 /// `GET /assets/{file}`: a script or style sheet of the page, named by its
-/// hash (so never changed under the same name).
+/// hash (so never changed under the same name), or a file of a folder so
+/// named.
 async fn asset(Path(name): Path<String>) -> Response {
-    // Only the flat folder of assets: no `..`, no subfolders.
-    if name.contains('/') || name.starts_with('.') {
+    // The assets and one level of folders: no `..`, nothing hidden.
+    let parts: Vec<&str> = name.split('/').collect();
+    if parts.len() > 2 || parts.iter().any(|p| p.is_empty() || p.starts_with('.')) {
         return not_found(&format!("assets/{name}"));
     }
     file(

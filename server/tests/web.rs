@@ -128,6 +128,23 @@ fn the_page_and_its_assets_are_served_with_their_types_and_cache_headers() {
         assert!(text.contains(needle), "{asset} lacks {needle}");
         if asset.ends_with(".js") {
             assert!(text.contains("target_frame_time_ms"), "the job schema");
+            // The Basis Universal transcoder's folder, for KTX2 atlases.
+            let at = text.find("assets/basis-").expect("the transcoder's folder");
+            let folder = &text[at..at + "assets/basis-".len() + 16];
+            for (file, kind) in [
+                ("basis_transcoder.js", "text/javascript; charset=utf-8"),
+                ("basis_transcoder.wasm", "application/wasm"),
+            ] {
+                let (s, head, body) = get(addr, &format!("/{folder}/{file}"));
+                assert_eq!(s, 200, "{folder}/{file}");
+                assert_eq!(header(&head, "content-type"), Some(kind));
+                assert!(body.len() > 10_000, "{file}: {} bytes", body.len());
+            }
+            assert_eq!(get(addr, &format!("/{folder}/../index.html")).0, 404);
+            assert_eq!(
+                get(addr, &format!("/{folder}/x/basis_transcoder.js")).0,
+                404
+            );
         }
     }
     // Control: an unknown asset is a 404, not the page; the API is as it was.
@@ -194,6 +211,142 @@ fn the_page_sends_the_token_the_user_enters() {
     let _ = std::fs::remove_dir_all(dir);
 }
 
+/// Submits `scene` with the job `job_text` through the page's form (bake
+/// checked, as by default), waits for the job page to show it succeeded
+/// and returns its id. The page must be on `#/submit`.
+fn submit_through_form(b: &mut Browser, scene: &std::path::Path, job_text: &str) -> String {
+    let root = b.call("DOM.getDocument", json!({})).unwrap()["root"]["nodeId"].clone();
+    let input = b
+        .call(
+            "DOM.querySelector",
+            json!({"nodeId": root, "selector": "#scene"}),
+        )
+        .unwrap()["nodeId"]
+        .clone();
+    b.call(
+        "DOM.setFileInputFiles",
+        json!({"nodeId": input, "files": [scene.to_str().unwrap()]}),
+    )
+    .unwrap();
+    b.eval(&format!(
+        "document.getElementById('job').value = {}; document.getElementById('submit').click(); true",
+        serde_json::to_string(job_text).unwrap()
+    ));
+    let state = b.wait_for(
+        "(() => { const p = document.getElementById('job-page');
+                  return p && p.dataset.ready === 'true' && p.dataset.state; })()",
+        Duration::from_secs(600),
+        "the job page showing a finished job",
+    );
+    assert_eq!(state, "succeeded");
+    let id = b.eval("document.getElementById('job-page').dataset.job");
+    id.as_str().unwrap().to_string()
+}
+
+/// Opens the viewer of the job on the page (`open-viewer`) and waits for it.
+fn open_viewer(b: &mut Browser) {
+    b.eval("document.getElementById('open-viewer').click(); true");
+    b.wait_for(
+        "(() => { const v = document.getElementById('viewer');
+                  if (v && v.dataset.error) throw new Error(v.dataset.error);
+                  return v && v.dataset.ready === 'true'; })()",
+        Duration::from_secs(120),
+        "the viewer loading the job",
+    );
+}
+
+/// The CPV of `placement` holding the view at `p` looking along `d`, by the
+/// convention of DESIGN.md: the eye in the CPV's region (min inclusive, max
+/// exclusive except at the view space's maximum `vs_max`) and the direction
+/// in its VDI (cube face 2·axis + (0 if positive else 1), a direction on an
+/// edge on the lower face; (u, v) the other two coordinates over the major
+/// one's magnitude, bounds inclusive). The first such CPV.
+fn cpv_at<'a>(
+    placement: &'a Value,
+    vs_max: [f64; 3],
+    p: [f64; 3],
+    d: [f64; 3],
+) -> Option<&'a Value> {
+    let mut axis = 0;
+    for a in 1..3 {
+        if d[a].abs() > d[axis].abs() {
+            axis = a;
+        }
+    }
+    let m = d[axis].abs();
+    let face = 2 * axis + usize::from(d[axis] < 0.0);
+    let rest: Vec<f64> = (0..3).filter(|&a| a != axis).map(|a| d[a] / m).collect();
+    let f = |v: &Value| v.as_f64().unwrap();
+    placement["cpvs"].as_array().unwrap().iter().find(|c| {
+        let dirs = &c["directions"];
+        let in_vdi = dirs["face"].as_u64().unwrap() as usize == face
+            && (f(&dirs["u"][0])..=f(&dirs["u"][1])).contains(&rest[0])
+            && (f(&dirs["v"][0])..=f(&dirs["v"][1])).contains(&rest[1]);
+        let r = &c["region"];
+        let in_region = (0..3).all(|a| {
+            let (lo, hi) = (f(&r["min"][a]), f(&r["max"][a]));
+            p[a] >= lo && p[a] <= hi && (p[a] < hi || hi == vs_max[a])
+        });
+        in_vdi && in_region
+    })
+}
+
+/// The impostors' footprint in views of `placement`'s CPVs with impostors
+/// (each from its region's centre along its VDI's centre), tried in order
+/// of their impostors' apparent size from there (sum of (radius /
+/// distance)²), at most 8: the view in which impostors or their objects
+/// cover the most pixels (at least 200), as (CPV id, pixels, footprint,
+/// mismatch) (`impostorViewer.footprint()`). At eye level in the tenth-scale
+/// city the impostors are far away and small (~0.1 % of the canvas), so
+/// their outlines weigh much: about a fifth of the footprint mismatches.
+/// An atlas that failed to decode would mismatch all of it (transparent:
+/// no impostor pixel) or far more than its objects (opaque: whole quads).
+fn footprint_view(b: &mut Browser, placement: &Value) -> (u64, u64, u64, u64) {
+    let f = |v: &Value| v.as_f64().unwrap();
+    let apparent = |cpv: &Value| -> f64 {
+        let (p, _) = view_in(cpv);
+        cpv["impostors"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|i| {
+                let sphere = &placement["impostors"][i.as_u64().unwrap() as usize]["sphere"];
+                let d2: f64 = (0..3)
+                    .map(|a| (f(&sphere["center"][a]) - p[a]).powi(2))
+                    .sum();
+                f(&sphere["radius"]).powi(2) / d2.max(1e-6)
+            })
+            .sum()
+    };
+    let mut cpvs: Vec<(f64, &Value)> = placement["cpvs"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter(|c| !c["impostors"].as_array().unwrap().is_empty())
+        .map(|c| (apparent(c), c))
+        .collect();
+    cpvs.sort_by(|a, b| b.0.total_cmp(&a.0));
+    let mut best = None;
+    for (_, cpv) in cpvs.into_iter().take(8) {
+        let (p, d) = view_in(cpv);
+        b.eval(&format!("impostorViewer.lookFrom({p:?}, {d:?})"));
+        let f = b.eval("impostorViewer.footprint()");
+        let n = |k: &str| f[k].as_u64().unwrap();
+        let view = (
+            cpv["id"].as_u64().unwrap(),
+            n("pixels"),
+            n("footprint"),
+            n("mismatch"),
+        );
+        if best.is_none_or(|b: (u64, u64, u64, u64)| view.2 > b.2) {
+            best = Some(view);
+        }
+    }
+    let best = best.expect("CPVs with impostors");
+    assert!(best.2 >= 200, "the impostors cover only {} pixels", best.2);
+    best
+}
+
 /// A view in `cpv`: its region's centre looking along its VDI's centre.
 fn view_in(cpv: &Value) -> ([f64; 3], [f64; 3]) {
     let r = &cpv["region"];
@@ -228,9 +381,16 @@ fn the_page_submits_a_job_follows_it_and_views_its_impostors() {
     let glb = common::city(0.1);
     let scene_path = dir.join("city.glb");
     std::fs::write(&scene_path, &glb).unwrap();
-    // The small city's job, with a short walkthrough for the viewer's walk.
+    // The small city's job, with a walkthrough for the viewer's walk: three
+    // turns, through several cells and view directions.
     let mut job = common::process::small_job();
-    job["walkthrough"] = json!({"points": [[20.0, 1.8, 20.0], [40.0, 1.8, 30.0]]});
+    let path = [
+        [20.0, 1.8, 20.0],
+        [60.0, 1.8, 30.0],
+        [60.0, 1.8, 80.0],
+        [20.0, 1.8, 60.0],
+    ];
+    job["walkthrough"] = json!({ "points": path });
     let job_text = job.to_string();
 
     b.navigate(&format!("http://{addr}/#/submit"));
@@ -262,33 +422,7 @@ fn the_page_submits_a_job_follows_it_and_views_its_impostors() {
         json!([])
     );
 
-    // The real submission: scene file, job JSON, bake (checked by default).
-    let root = b.call("DOM.getDocument", json!({})).unwrap()["root"]["nodeId"].clone();
-    let input = b
-        .call(
-            "DOM.querySelector",
-            json!({"nodeId": root, "selector": "#scene"}),
-        )
-        .unwrap()["nodeId"]
-        .clone();
-    b.call(
-        "DOM.setFileInputFiles",
-        json!({"nodeId": input, "files": [scene_path.to_str().unwrap()]}),
-    )
-    .unwrap();
-    b.eval(&format!(
-        "document.getElementById('job').value = {}; document.getElementById('submit').click(); true",
-        serde_json::to_string(&job_text).unwrap()
-    ));
-    let state = b.wait_for(
-        "(() => { const p = document.getElementById('job-page');
-                  return p && p.dataset.ready === 'true' && p.dataset.state; })()",
-        Duration::from_secs(600),
-        "the job page showing a finished job",
-    );
-    assert_eq!(state, "succeeded");
-    let id = b.eval("document.getElementById('job-page').dataset.job");
-    let id = id.as_str().unwrap().to_string();
+    let id = submit_through_form(&mut b, &scene_path, &job_text);
     let (s, _, status) = get(addr, &format!("/v1/jobs/{id}"));
     assert_eq!(s, 200);
     let status: Value = serde_json::from_slice(&status).unwrap();
@@ -311,14 +445,7 @@ fn the_page_submits_a_job_follows_it_and_views_its_impostors() {
     assert!(scene == glb, "the scene differs from the upload");
 
     // The viewer.
-    b.eval("document.getElementById('open-viewer').click(); true");
-    b.wait_for(
-        "(() => { const v = document.getElementById('viewer');
-                  if (v && v.dataset.error) throw new Error(v.dataset.error);
-                  return v && v.dataset.ready === 'true'; })()",
-        Duration::from_secs(120),
-        "the viewer loading the job",
-    );
+    open_viewer(&mut b);
     let (_, _, placement) = get(addr, &format!("/v1/jobs/{id}/placement"));
     let placement: Value = serde_json::from_slice(&placement).unwrap();
     let cpvs = placement["cpvs"].as_array().unwrap();
@@ -352,6 +479,16 @@ fn the_page_submits_a_job_follows_it_and_views_its_impostors() {
         let ms: f64 = state["frameMs"].as_str().unwrap().parse().unwrap();
         assert_eq!(ms, cpv["time_ms_final"].as_f64().unwrap());
     }
+
+    // The impostors cover what their objects covered.
+    let (cpv, pixels, footprint, mismatch) = footprint_view(&mut b, &placement);
+    eprintln!("PNG: CPV {cpv}: footprint {footprint} of {pixels} pixels, mismatch {mismatch}");
+    assert!(
+        mismatch * 3 <= footprint,
+        "CPV {cpv}: {mismatch} of {footprint} pixels mismatch"
+    );
+    let (p, d) = view_in(with);
+    b.eval(&format!("impostorViewer.lookFrom({p:?}, {d:?})"));
 
     // The view cells of the shown impostors (the camera is in `with`):
     // shafts as cones (meshes), boxes as boxes (lines).
@@ -416,18 +553,63 @@ fn the_page_submits_a_job_follows_it_and_views_its_impostors() {
         "the walk reaching the path's end",
     );
     let end = b.eval("impostorViewer.state().position");
-    for (a, want) in [40.0, 1.8, 30.0].iter().enumerate() {
+    for (a, want) in path[3].iter().enumerate() {
         let got = end[a].as_f64().unwrap();
         assert!((got - want).abs() < 1e-6, "walk ended at {end}");
     }
 
-    // The canvas shows the scene: far from all clear colour.
-    let pixels = b.eval(
-        "new Promise(r => requestAnimationFrame(() => requestAnimationFrame(() => r(impostorViewer.pixels()))))",
+    // A walk of 100 frames along the path: at every frame the CPV shown is
+    // the placement's CPV of the camera's view (found here from the
+    // placement alone), with its impostors and only those drawn; the canvas
+    // is drawn at frames along the way.
+    let vs_max = [474.0, 2.0, 316.0];
+    let mut seen = std::collections::BTreeSet::new();
+    for i in 0..100 {
+        let state = b.eval(&format!("impostorViewer.walkFrame({i}, 100)"));
+        let xyz = |k: &str| [0, 1, 2].map(|a| state[k][a].as_f64().unwrap());
+        let cpv = cpv_at(&placement, vs_max, xyz("position"), xyz("direction"));
+        let (id, active) = match cpv {
+            Some(c) => (
+                c["id"].to_string(),
+                c["impostors"]
+                    .as_array()
+                    .unwrap()
+                    .iter()
+                    .map(|i| i.as_u64().unwrap())
+                    .collect(),
+            ),
+            None => (String::new(), Vec::new()),
+        };
+        assert_eq!(state["cpv"], id, "frame {i}: {state}");
+        assert_eq!(
+            state["activeImpostors"],
+            id_list(active.clone()),
+            "frame {i}"
+        );
+        assert_eq!(
+            state["visibleImpostorNodes"],
+            active.len().to_string(),
+            "frame {i}"
+        );
+        if !active.is_empty() {
+            seen.insert(id);
+        }
+        if i % 33 == 0 {
+            let pixels = b.eval("impostorViewer.pixels()");
+            let total = pixels["width"].as_u64().unwrap() * pixels["height"].as_u64().unwrap();
+            let drawn = pixels["drawn"].as_u64().unwrap();
+            assert!(
+                drawn * 20 > total,
+                "frame {i}: only {drawn} of {total} pixels drawn"
+            );
+        }
+    }
+    // The check could fail: the walk passes through several CPVs that
+    // have impostors.
+    assert!(
+        seen.len() >= 3,
+        "the walk met only CPVs {seen:?} with impostors"
     );
-    let total = pixels["width"].as_u64().unwrap() * pixels["height"].as_u64().unwrap();
-    let drawn = pixels["drawn"].as_u64().unwrap();
-    assert!(drawn * 20 > total, "only {drawn} of {total} pixels drawn");
     // The job list shows the job.
     b.navigate(&format!("http://{addr}/#/"));
     let row = b.wait_for(
@@ -438,6 +620,75 @@ fn the_page_submits_a_job_follows_it_and_views_its_impostors() {
         "the job in the list",
     );
     assert!(row.as_str().unwrap().contains("succeeded"), "{row}");
+    let problems = b.problems();
+    assert!(problems.is_empty(), "the page had errors: {problems:?}");
+    drop(b);
+    terminate(&mut child, Duration::from_secs(30));
+    let _ = std::fs::remove_dir_all(dir);
+}
+
+/// Impostors baked as KTX2 (`memory.texture_format`, Basis Universal
+/// UASTC with mip levels) load in the viewer through three.js's KTX2Loader
+/// and the transcoder the server serves, and cover what their objects did.
+#[test]
+fn the_viewer_shows_impostors_baked_as_ktx2() {
+    let Some(mut b) = Browser::start() else {
+        return;
+    };
+    let (mut child, addr, dir) = spawn("ktx2");
+    let scene_path = dir.join("city.glb");
+    std::fs::write(&scene_path, common::city(0.1)).unwrap();
+    let mut job = common::process::small_job();
+    job["memory"] = json!({"texture_format": "ktx2"});
+    b.navigate(&format!("http://{addr}/#/submit"));
+    b.wait_for(
+        "!!document.getElementById('scene')",
+        Duration::from_secs(30),
+        "the submit form",
+    );
+    let id = submit_through_form(&mut b, &scene_path, &job.to_string());
+    let (s, _, glb) = get(addr, &format!("/v1/jobs/{id}/impostors.glb"));
+    assert_eq!(s, 200);
+    let n = u32::from_le_bytes(glb[12..16].try_into().unwrap()) as usize;
+    let gltf: Value = serde_json::from_slice(&glb[20..20 + n]).unwrap();
+    assert_eq!(gltf["extensionsRequired"], json!(["KHR_texture_basisu"]));
+    let images = gltf["images"].as_array().unwrap();
+    assert!(!images.is_empty());
+    assert!(
+        images.iter().all(|i| i["mimeType"] == "image/ktx2"),
+        "{images:?}"
+    );
+    let (_, _, placement) = get(addr, &format!("/v1/jobs/{id}/placement"));
+    let placement: Value = serde_json::from_slice(&placement).unwrap();
+
+    open_viewer(&mut b);
+    // Every atlas arrived as a compressed texture with its mip chain.
+    let textures = b.eval("impostorViewer.textures()");
+    let textures = textures.as_array().unwrap();
+    assert_eq!(textures.len(), images.len(), "{textures:?}");
+    for t in textures {
+        assert_eq!(t["compressed"], true, "{t}");
+        assert!(t["width"].as_u64().unwrap() > 0, "{t}");
+        assert!(t["mipmaps"].as_u64().unwrap() > 1, "{t}");
+    }
+    let (cpv, pixels, footprint, mismatch) = footprint_view(&mut b, &placement);
+    eprintln!("KTX2: CPV {cpv}: footprint {footprint} of {pixels} pixels, mismatch {mismatch}");
+    assert!(
+        mismatch * 3 <= footprint,
+        "CPV {cpv}: {mismatch} of {footprint} pixels mismatch"
+    );
+    // Control: the same view with the atlases dropped (the layers drawn as
+    // opaque quads) mismatches far more.
+    let control = b.eval(
+        "impostorViewer.impostorNodes.forEach((nodes) => nodes.forEach((n) => n.traverse((o) => {
+           if (o.material) { o.material.map = null; o.material.alphaTest = 0;
+                             o.material.transparent = false; o.material.needsUpdate = true; }
+         })));
+         impostorViewer.footprint()",
+    );
+    let n = |k: &str| control[k].as_u64().unwrap();
+    eprintln!("KTX2 control: {control}");
+    assert!(n("mismatch") * 3 > n("footprint"), "{control}");
     let problems = b.problems();
     assert!(problems.is_empty(), "the page had errors: {problems:?}");
     drop(b);

@@ -4,11 +4,16 @@
 // shows that CPV's impostors in place of their clusters' objects and plots
 // the CPV's estimated frame time with and without impostors.
 //
+// Atlases may be PNG or KTX2 (Basis Universal, transcoded by three.js's
+// KTX2Loader with the transcoder the server serves).
+//
 // State for tests and scripts: the #viewer element's data-* attributes
 // (ready, cpv, active-impostors, hidden-objects, frame-ms,
-// frame-ms-original, visible-impostor-nodes, walking) and window.impostorViewer.
+// frame-ms-original, visible-impostor-nodes, walking) and window.impostorViewer
+// (lookFrom, walkFrame, state, textures, pixels, footprint, objectBox).
 import * as THREE from "three";
 import { GLTFLoader } from "three/examples/jsm/loaders/GLTFLoader.js";
+import { KTX2Loader } from "three/examples/jsm/loaders/KTX2Loader.js";
 import { bytes, json } from "./api.js";
 import { FrameChart } from "./chart.js";
 import { findCpv } from "./cpv.js";
@@ -21,28 +26,36 @@ const LARGE_TRIANGLES = 5_000_000;
 /// Meshes on this layer are not drawn (the camera sees layer 0 only);
 /// layers are not inherited, so hiding a node's meshes leaves its children.
 const HIDDEN = 1;
+/// The Basis Universal transcoder's folder (set by build.mjs), for KTX2
+/// atlases (`KHR_texture_basisu`).
+const TRANSCODER = BASIS_PATH;
 
 export async function viewerPage(main, id, signal) {
   const root = h("section", { id: "viewer", class: "viewer-page" });
   main.append(h("h1", {}, "Viewer of job ", h("a", { href: `#/jobs/${id}` }, h("code", {}, id))), root);
   const status = h("p", {}, "Loading the scene, the impostors and the placement…");
   root.append(status);
+  const canvas = h("canvas", { class: "scene", width: 960, height: 600, tabindex: 0 });
+  const renderer = new THREE.WebGLRenderer({ canvas, antialias: true, preserveDrawingBuffer: true });
   let data;
   try {
-    data = await load(id);
+    data = await load(id, renderer);
   } catch (e) {
+    renderer.dispose();
     status.replaceWith(errorBox(e));
     root.dataset.error = String(e.message || e);
     return;
   }
   if (signal.aborted) return;
   status.remove();
-  const viewer = new Viewer(root, data, signal);
+  const viewer = new Viewer(root, renderer, data, signal);
   window.impostorViewer = viewer;
   root.dataset.ready = "true";
 }
 
-async function load(id) {
+/// The job, its placement, its scene and its baked impostors (PNG or KTX2
+/// atlases), parsed by three.js's GLTFLoader for `renderer`.
+async function load(id, renderer) {
   const job = await json(`/v1/jobs/${id}`);
   if (job.state !== "succeeded") throw new Error(`job ${id} is ${job.state}: the viewer needs a finished job`);
   if (!job.bake) throw new Error(`job ${id} was not baked: submit it with “bake” to view its impostors`);
@@ -52,11 +65,17 @@ async function load(id) {
     bytes(`/v1/jobs/${id}/scene`),
     bytes(`/v1/jobs/${id}/impostors.glb`),
   ]);
-  const loader = new GLTFLoader();
-  const [scene, impostors] = await Promise.all([
-    loader.parseAsync(sceneBytes, ""),
-    loader.parseAsync(impostorBytes, ""),
-  ]);
+  const ktx2 = new KTX2Loader().setTranscoderPath(TRANSCODER).detectSupport(renderer);
+  const loader = new GLTFLoader().setKTX2Loader(ktx2);
+  let scene, impostors;
+  try {
+    [scene, impostors] = await Promise.all([
+      loader.parseAsync(sceneBytes, ""),
+      loader.parseAsync(impostorBytes, ""),
+    ]);
+  } finally {
+    ktx2.dispose();
+  }
   const sceneJson = glbJson(sceneBytes);
   const nodeObjects = await Promise.all(
     (sceneJson.nodes || []).map((_, i) => scene.parser.getDependency("node", i)));
@@ -64,14 +83,15 @@ async function load(id) {
 }
 
 class Viewer {
-  constructor(root, { params, placement, scene, sceneJson, nodeObjects, impostors }, signal) {
+  constructor(root, renderer, { params, placement, scene, sceneJson, nodeObjects, impostors }, signal) {
     this.root = root;
     this.placement = placement;
     this.vs = params.view_space;
     this.target = placement.summary.target_frame_time_ms;
     this.walkPoints = params.walkthrough ? params.walkthrough.points : null;
 
-    this.canvas = h("canvas", { class: "scene", width: 960, height: 600, tabindex: 0 });
+    this.renderer = renderer;
+    this.canvas = renderer.domElement;
     const chartCanvas = h("canvas", { width: 380, height: 200, id: "frame-chart" });
     this.info = h("div", { id: "viewer-info" });
     const toggle = (label, fn) => h("label", {}, h("input", { type: "checkbox", onchange: (e) => fn(e.target.checked) }), ` ${label}`, h("br"));
@@ -87,7 +107,6 @@ class Viewer {
     root.append(layout);
     this.chart = new FrameChart(chartCanvas);
 
-    this.renderer = new THREE.WebGLRenderer({ canvas: this.canvas, antialias: true, preserveDrawingBuffer: true });
     this.renderer.setClearColor(0xb0bec5);
     this.three = new THREE.Scene();
     this.three.add(new THREE.HemisphereLight(0xffffff, 0x555555, 2.5));
@@ -208,9 +227,7 @@ class Viewer {
       this.root.dataset.walking = "false";
       return;
     }
-    const pts = this.walkPoints.map((p) => new THREE.Vector3(...p));
-    const lengths = pts.slice(1).map((p, i) => p.distanceTo(pts[i]));
-    this.walk = { pts, lengths, total: lengths.reduce((a, b) => a + b, 0), s: 0 };
+    this.walk = { ...this.path(), s: 0 };
     this.walkButton.textContent = "Stop walking";
     this.root.dataset.walking = "true";
   }
@@ -219,15 +236,7 @@ class Viewer {
     if (this.walk) {
       const w = this.walk;
       w.s = Math.min(w.total, w.s + dt * Math.max(5, w.total / 30));
-      let s = w.s, i = 0;
-      while (i < w.lengths.length - 1 && s > w.lengths[i]) { s -= w.lengths[i]; i++; }
-      const seg = w.pts[i + 1].clone().sub(w.pts[i]);
-      this.pos.copy(w.pts[i]).addScaledVector(seg, w.lengths[i] > 0 ? s / w.lengths[i] : 0);
-      if (w.lengths[i] > 0) {
-        seg.normalize();
-        this.yaw = Math.atan2(-seg.x, -seg.z);
-        this.pitch = Math.asin(seg.y);
-      }
+      this.poseOnPath(w, w.s);
       if (w.s >= w.total) this.toggleWalk();
       return;
     }
@@ -300,8 +309,43 @@ class Viewer {
     this.cellsFor = this.cpv;
   }
 
+  /// The job's walkthrough path: its points, segment lengths and length.
+  path() {
+    const pts = this.walkPoints.map((p) => new THREE.Vector3(...p));
+    const lengths = pts.slice(1).map((p, i) => p.distanceTo(pts[i]));
+    return { pts, lengths, total: lengths.reduce((a, b) => a + b, 0) };
+  }
+
+  /// Puts the camera at arc length `s` of `path`, looking along its segment.
+  poseOnPath(path, s) {
+    let i = 0;
+    while (i < path.lengths.length - 1 && s > path.lengths[i]) { s -= path.lengths[i]; i++; }
+    const seg = path.pts[i + 1].clone().sub(path.pts[i]);
+    this.pos.copy(path.pts[i]).addScaledVector(seg, path.lengths[i] > 0 ? s / path.lengths[i] : 0);
+    if (path.lengths[i] > 0) {
+      seg.normalize();
+      this.yaw = Math.atan2(-seg.x, -seg.z);
+      this.pitch = Math.asin(seg.y);
+    }
+  }
+
+  /// Frame `i` of a walk of `n` frames along the job's path (frame 0 at its
+  /// start, frame n − 1 at its end), drawn: its state (stops a walk).
+  walkFrame(i, n) {
+    if (!this.walkPoints) throw new Error("the job has no walkthrough path");
+    if (this.walk) this.toggleWalk();
+    const path = this.path();
+    this.poseOnPath(path, n > 1 ? (path.total * i) / (n - 1) : 0);
+    this.tick(0);
+    return this.state();
+  }
+
+  /// The camera and the CPV shown: the #viewer element's data attributes,
+  /// the position and the view direction.
   state() {
-    return { ...this.root.dataset, position: this.pos.toArray() };
+    const d = new THREE.Vector3();
+    this.camera.getWorldDirection(d);
+    return { ...this.root.dataset, position: this.pos.toArray(), direction: d.toArray() };
   }
 
   /// The world box of object `id`'s meshes: their local boxes' transformed
@@ -313,18 +357,76 @@ class Viewer {
     return { min: box.min.toArray(), max: box.max.toArray() };
   }
 
+  /// The atlas textures of the baked impostors, one entry per texture:
+  /// whether three.js holds it GPU-compressed (transcoded from KTX2), its
+  /// size and its number of mip levels in the file (0 when the GPU makes
+  /// them, as for PNG).
+  textures() {
+    const seen = new Map();
+    for (const nodes of this.impostorNodes.values()) {
+      for (const n of nodes) {
+        n.traverse((o) => {
+          const map = o.material && o.material.map;
+          if (!map || seen.has(map.uuid)) return;
+          const img = map.image || {};
+          seen.set(map.uuid, {
+            compressed: !!map.isCompressedTexture,
+            width: img.width || 0,
+            height: img.height || 0,
+            mipmaps: (map.mipmaps || []).length,
+          });
+        });
+      }
+    }
+    return [...seen.values()];
+  }
+
   /// How many of the canvas's pixels are not the clear colour.
   pixels() {
-    const gl = this.renderer.getContext();
-    const w = gl.drawingBufferWidth, hgt = gl.drawingBufferHeight;
-    const px = new Uint8Array(w * hgt * 4);
-    gl.readPixels(0, 0, w, hgt, gl.RGBA, gl.UNSIGNED_BYTE, px);
+    const { width, height, px } = this.readPixels();
     const clear = new THREE.Color(0xb0bec5);
     const [r, g, b] = [clear.r, clear.g, clear.b].map((c) => Math.round(c * 255));
     let drawn = 0;
     for (let i = 0; i < px.length; i += 4) {
       if (Math.abs(px[i] - r) > 2 || Math.abs(px[i + 1] - g) > 2 || Math.abs(px[i + 2] - b) > 2) drawn++;
     }
-    return { width: w, height: hgt, drawn };
+    return { width, height, drawn };
+  }
+
+  /// The impostors' coverage in the current view against their objects':
+  /// the view is drawn as shown, with the CPV's replaced objects and
+  /// impostors both hidden ("behind"), and as the plain scene. A pixel is
+  /// covered by the impostors where the view as shown differs from behind,
+  /// by the objects where the plain scene does; the footprint is the pixels
+  /// covered by either and the mismatch those covered by one only (colours
+  /// are not compared: the viewer's lights are not the bake's).
+  footprint() {
+    const cpv = this.cpv;
+    const draw = () => { this.renderer.render(this.three, this.camera); return this.readPixels().px; };
+    const shown = draw();
+    const nodes = [...this.impostorNodes.values()].flat().filter((n) => n.visible);
+    for (const n of nodes) n.visible = false;
+    const behind = draw();
+    for (const n of nodes) n.visible = true;
+    this.switchCpv(null);
+    const plain = draw();
+    this.switchCpv(cpv);
+    draw();
+    const differs = (a, b, i) => Math.abs(a[i] - b[i]) + Math.abs(a[i + 1] - b[i + 1]) + Math.abs(a[i + 2] - b[i + 2]) > 6;
+    let footprint = 0, mismatch = 0;
+    for (let i = 0; i < shown.length; i += 4) {
+      const imp = differs(shown, behind, i), obj = differs(plain, behind, i);
+      if (imp || obj) footprint++;
+      if (imp !== obj) mismatch++;
+    }
+    return { pixels: shown.length / 4, footprint, mismatch };
+  }
+
+  readPixels() {
+    const gl = this.renderer.getContext();
+    const width = gl.drawingBufferWidth, height = gl.drawingBufferHeight;
+    const px = new Uint8Array(width * height * 4);
+    gl.readPixels(0, 0, width, height, gl.RGBA, gl.UNSIGNED_BYTE, px);
+    return { width, height, px };
   }
 }
