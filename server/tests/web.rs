@@ -261,12 +261,7 @@ fn open_viewer(b: &mut Browser) {
 /// in its VDI (cube face 2·axis + (0 if positive else 1), a direction on an
 /// edge on the lower face; (u, v) the other two coordinates over the major
 /// one's magnitude, bounds inclusive). The first such CPV.
-fn cpv_at<'a>(
-    placement: &'a Value,
-    vs_max: [f64; 3],
-    p: [f64; 3],
-    d: [f64; 3],
-) -> Option<&'a Value> {
+fn cpv_at(placement: &Value, vs_max: [f64; 3], p: [f64; 3], d: [f64; 3]) -> Option<&Value> {
     let mut axis = 0;
     for a in 1..3 {
         if d[a].abs() > d[axis].abs() {
