@@ -1,6 +1,6 @@
 //! `bake --textures ktx2`: KTX2 (Basis Universal UASTC) atlases behind
-//! `KHR_texture_basisu` that the Khronos validator accepts and that decode
-//! back to the PNG bake's atlases.
+//! `KHR_texture_basisu` that the Khronos validator accepts, that decode
+//! back to the PNG bake's atlases and that `evaluate --impostors` reads.
 
 use optimizer::bake::ktx2::decode_uastc;
 use optimizer::bake::mips::coverage;
@@ -180,6 +180,57 @@ fn ktx2_bake_validates_and_decodes_to_the_png_atlases() {
             );
         }
     }
+
+    // This tool's own readers take the KTX2 bake as they take the PNG one
+    // (level 0 decoded): the same layers, and `evaluate --images
+    // --impostors` sees nearly the PNG bake's image error (UASTC's block
+    // error adds a little), far from its magenta control.
+    let layers = |glb: &std::path::Path| {
+        optimizer::bake::read_layers(&std::fs::read(glb).unwrap(), "baked").unwrap()
+    };
+    let (png_layers, ktx_layers) = (layers(&png_glb), layers(&ktx_glb));
+    assert_eq!(png_layers.len(), ktx_layers.len());
+    for (a, b) in png_layers.iter().zip(&ktx_layers) {
+        assert_eq!((a.impostor, a.index, a.res), (b.impostor, b.index, b.res));
+        assert_eq!(a.corners, b.corners);
+    }
+    let image = |glb: &std::path::Path, name: &str| {
+        let out = dir.join(name);
+        let o = run(&[
+            "evaluate",
+            s(&city),
+            "--job",
+            s(&job),
+            "--placement",
+            s(&p),
+            "--views",
+            "50",
+            "--images",
+            "24",
+            "--impostors",
+            s(glb),
+            "-o",
+            s(&out),
+        ]);
+        assert_eq!(code(&o), 0, "{}", stderr(&o));
+        read_json(&out)["image"].clone()
+    };
+    let (png_image, ktx_image) = (
+        image(&png_glb, "e-png.json"),
+        image(&ktx_glb, "e-ktx2.json"),
+    );
+    let mean = |i: &serde_json::Value, k: &str| i[k]["mean"].as_f64().unwrap();
+    assert!(ktx_image["views"].as_u64().unwrap() >= 10, "{ktx_image}");
+    assert_eq!(ktx_image["views"], png_image["views"]);
+    let (pm, km) = (
+        mean(&png_image, "footprint_mismatch_fraction"),
+        mean(&ktx_image, "footprint_mismatch_fraction"),
+    );
+    assert!(km <= pm + 0.02, "KTX2 mismatch {km} against PNG {pm}");
+    assert!(
+        mean(&ktx_image, "control_mismatch_fraction") > 10.0 * km,
+        "{ktx_image}"
+    );
 
     // Deterministic: the same bake gives the same bytes.
     let again = dir.join("ktx2-again.glb");

@@ -102,6 +102,7 @@ class Viewer {
       h("p", {}, this.walkButton),
       toggle("view cells of the shown impostors", (on) => { this.showCells = on; this.cellsFor = null; }),
       toggle("CPV regions", (on) => { this.regions.visible = on; this.cpvBox.visible = on; }),
+      toggle("the scene without impostors", (on) => this.setPlain(on)),
       h("h3", {}, "Estimated frame time of the camera's CPV"), chartCanvas, this.info);
     const layout = h("div", { class: "viewer" }, this.canvas, aside);
     root.append(layout);
@@ -137,6 +138,7 @@ class Viewer {
     this.keys = new Set();
     this.walk = null;
     this.cpv = undefined;
+    this.plain = false;
     this.bindInput(signal);
     if (this.triangles > LARGE_TRIANGLES) {
       root.prepend(h("p", { class: "note" }, `The scene has ${this.triangles.toLocaleString()} triangles: ` +
@@ -268,10 +270,18 @@ class Viewer {
     this.renderer.render(this.three, this.camera);
   }
 
-  /// Shows `cpv`'s impostors and hides the objects of their clusters.
+  /// Draws every object and no impostor (`on`), or the placement again.
+  setPlain(on) {
+    this.plain = on;
+    this.switchCpv(this.cpv);
+    this.root.dataset.plain = String(on);
+  }
+
+  /// Shows `cpv`'s impostors and hides the objects of their clusters
+  /// (unless the scene is shown without impostors).
   switchCpv(cpv) {
     this.cpv = cpv;
-    const active = cpv ? [...cpv.impostors].sort((a, b) => a - b) : [];
+    const active = cpv && !this.plain ? [...cpv.impostors].sort((a, b) => a - b) : [];
     const hidden = new Set();
     for (const i of active) for (const o of this.placement.impostors[i].objects) hidden.add(o);
     this.objectMeshes.forEach((meshes, id) => {

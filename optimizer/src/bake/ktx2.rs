@@ -291,6 +291,45 @@ pub fn decode_uastc(blocks_data: &[u8], width: u32, height: u32) -> Result<Vec<u
     Ok(rgba)
 }
 
+/// Level 0 of a KTX2 file of UASTC content (as `bake --textures ktx2`
+/// writes, or any 2D KTX2 file with UASTC blocks and no
+/// supercompression) decoded to RGBA8 texels, rows from the top, once its
+/// size has passed `check(width, height)`. `what` names the image in
+/// errors.
+pub fn decode_ktx2(
+    bytes: &[u8],
+    what: &str,
+    check: impl FnOnce(u32, u32) -> Result<()>,
+) -> Result<(u32, u32, Vec<u8>)> {
+    let bad = |m: String| Error::bad(what, m);
+    let r = ktx2::Reader::new(bytes).map_err(|e| bad(format!("not a readable KTX2 file: {e}")))?;
+    let h = r.header();
+    if r.color_model() != Some(ktx2::ColorModel::UASTC) || h.format.is_some() {
+        return Err(bad(format!(
+            "KTX2 content {:?} is not supported (only Basis Universal UASTC is read)",
+            h.format
+                .map_or_else(|| format!("{:?}", r.color_model()), |f| format!("{f:?}"))
+        )));
+    }
+    if let Some(scheme) = h.supercompression_scheme {
+        return Err(bad(format!(
+            "KTX2 supercompression {scheme:?} is not supported (only uncompressed UASTC levels are read)"
+        )));
+    }
+    if h.pixel_depth > 1 || h.layer_count > 1 || h.face_count != 1 || h.pixel_height == 0 {
+        return Err(bad("only a single 2D KTX2 image is read".into()));
+    }
+    let (w, ht) = (h.pixel_width, h.pixel_height);
+    check(w, ht)?;
+    let level = r
+        .levels()
+        .next()
+        .ok_or_else(|| bad("the KTX2 file has no levels".into()))?;
+    let rgba = decode_uastc(level.data, w, ht)
+        .map_err(|e| bad(format!("its UASTC level 0 does not decode: {e}")))?;
+    Ok((w, ht, rgba))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -366,6 +405,32 @@ mod tests {
         let row = (w * 4) as usize;
         let flipped: Vec<u8> = px.chunks_exact(row).rev().flatten().copied().collect();
         assert!(psnr(&rgba, &flipped) < 25.0);
+    }
+
+    #[test]
+    fn a_ktx2_file_reads_as_its_level_0_and_bad_files_are_clear_errors() {
+        let (px, w, h) = cutout();
+        let file = encode_ktx2(&mip_chain(&px, w, h, 0.5, true)).unwrap();
+        let r = ktx2::Reader::new(&file[..]).unwrap();
+        let level0 = decode_uastc(r.levels().next().unwrap().data, w, h).unwrap();
+        let mut asked = None;
+        let read = decode_ktx2(&file, "atlas", |a, b| {
+            asked = Some((a, b));
+            Ok(())
+        })
+        .unwrap();
+        assert_eq!(read, (w, h, level0));
+        assert_eq!(asked, Some((64, 32)));
+        // The size check runs before decoding and its refusal is the error.
+        let refused = decode_ktx2(&file, "atlas", |_, _| Err(Error::bad("atlas", "too large")));
+        assert!(refused.unwrap_err().to_string().contains("too large"));
+        // Truncated, or with another supercompression: named, no panic.
+        let e = decode_ktx2(&file[..100], "atlas", |_, _| Ok(())).unwrap_err();
+        assert!(e.to_string().contains("not a readable KTX2 file"), "{e}");
+        let mut zstd = file.clone();
+        zstd[44..48].copy_from_slice(&2u32.to_le_bytes()); // supercompressionScheme
+        let e = decode_ktx2(&zstd, "atlas", |_, _| Ok(())).unwrap_err();
+        assert!(e.to_string().contains("supercompression"), "{e}");
     }
 
     #[test]

@@ -287,7 +287,9 @@ fn wrap(m: gltf::texture::WrappingMode) -> Wrap {
 }
 
 /// The bytes of an image: a buffer view, a base64 `data:` URI or (for local
-/// files) a relative path; decoded to RGBA8 with its size checked first,
+/// files) a relative path; a PNG, a JPEG or a KTX2 file of UASTC content
+/// (`KHR_texture_basisu`, as `bake --textures ktx2` writes), decoded to
+/// RGBA8 (KTX2: its level 0) with its size checked first,
 /// against [`MAX_IMAGE_SIDE`] and against `budget`, the bytes the scene's
 /// images may still take (reduced by this one's).
 fn decode_image(
@@ -332,35 +334,40 @@ fn decode_image(
             }
         }
     };
+    // Its size, checked before it is decoded.
+    let check = |w: u32, h: u32, budget: &mut u64| -> Result<()> {
+        if w == 0 || h == 0 || w > MAX_IMAGE_SIDE || h > MAX_IMAGE_SIDE {
+            return Err(Error::bad(
+                what,
+                format!("image size {w} × {h} is outside 1 … {MAX_IMAGE_SIDE} per side"),
+            ));
+        }
+        let size = 4 * u64::from(w) * u64::from(h);
+        if size > *budget {
+            return Err(Error::bad(
+                what,
+                format!(
+                    "the scene's images decode to more than {} GiB together (this one {w} × {h})",
+                    MAX_DECODED_IMAGE_BYTES >> 30
+                ),
+            ));
+        }
+        *budget -= size;
+        Ok(())
+    };
+    if bytes.starts_with(&crate::bake::ktx2::KTX2_IDENTIFIER) {
+        return crate::bake::ktx2::decode_ktx2(&bytes, what, |w, h| check(w, h, budget));
+    }
     let reader = image::ImageReader::new(Cursor::new(&*bytes))
         .with_guessed_format()
         .map_err(|e| Error::bad(what, format!("unreadable image: {e}")))?;
     if reader.format().is_none() {
-        return Err(Error::bad(
-            what,
-            "not a PNG or JPEG image (other formats such as KTX2 are not supported)",
-        ));
+        return Err(Error::bad(what, "not a PNG, JPEG or KTX2 (UASTC) image"));
     }
     let (w, h) = reader
         .into_dimensions()
         .map_err(|e| Error::bad(what, format!("unreadable image header: {e}")))?;
-    if w == 0 || h == 0 || w > MAX_IMAGE_SIDE || h > MAX_IMAGE_SIDE {
-        return Err(Error::bad(
-            what,
-            format!("image size {w} × {h} is outside 1 … {MAX_IMAGE_SIDE} per side"),
-        ));
-    }
-    let size = 4 * u64::from(w) * u64::from(h);
-    if size > *budget {
-        return Err(Error::bad(
-            what,
-            format!(
-                "the scene's images decode to more than {} GiB together (this one {w} × {h})",
-                MAX_DECODED_IMAGE_BYTES >> 30
-            ),
-        ));
-    }
-    *budget -= size;
+    check(w, h, budget)?;
     let mut reader = image::ImageReader::new(Cursor::new(&*bytes))
         .with_guessed_format()
         .map_err(|e| Error::bad(what, format!("unreadable image: {e}")))?;

@@ -88,8 +88,9 @@ pub(crate) fn precheck_root(root: &mut gltf::json::Root, source: &str) -> Result
 
 /// [`precheck_root`]; with `keep_base_color`, materials, base colour
 /// textures, their images and samplers are kept (every other texture slot
-/// is cleared, and a base colour texture without a usable `source`, such as
-/// a KTX2-only one, is dropped from its material).
+/// is cleared, a KTX2 texture without a fallback reads the image its
+/// `KHR_texture_basisu` names, and a base colour texture without a usable
+/// `source` is dropped from its material).
 pub(crate) fn precheck_root_with(
     root: &mut gltf::json::Root,
     source: &str,
@@ -136,6 +137,23 @@ pub(crate) fn precheck_root_with(
             root.samplers.len(),
             root.materials.len(),
         );
+        // A KTX2 texture (`KHR_texture_basisu`) without a fallback names
+        // its image in the extension: read that one.
+        for t in &mut root.textures {
+            let basisu = t
+                .extensions
+                .as_ref()
+                .and_then(|e| e.others.get("KHR_texture_basisu"))
+                .and_then(|b| b.get("source"))
+                .and_then(serde_json::Value::as_u64)
+                .and_then(|i| u32::try_from(i).ok());
+            if let Some(i) = basisu
+                && t.source.value() >= images
+                && (i as usize) < images
+            {
+                t.source = gltf::json::Index::new(i);
+            }
+        }
         let usable: Vec<bool> = root
             .textures
             .iter()
