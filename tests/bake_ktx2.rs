@@ -2,7 +2,7 @@
 //! `KHR_texture_basisu` that the Khronos validator accepts, that decode
 //! back to the PNG bake's atlases and that `evaluate --impostors` reads.
 
-use optimizer::bake::ktx2::decode_uastc;
+use optimizer::bake::ktx2::{decode_uastc, masked_psnr_db as psnr};
 use optimizer::bake::mips::coverage;
 
 use crate::util::*;
@@ -37,21 +37,6 @@ fn glb_parts(bytes: &[u8]) -> (serde_json::Value, Vec<u8>) {
     let glb = gltf::binary::Glb::from_slice(bytes).expect("a GLB");
     let json = serde_json::from_slice(&glb.json).expect("GLB JSON");
     (json, glb.bin.expect("a binary chunk").into_owned())
-}
-
-/// Peak signal-to-noise ratio of a decoded RGBA8 image against its source,
-/// dB, over what a masked material shows: alpha everywhere, colour where the
-/// source is not transparent.
-fn psnr(decoded: &[u8], source: &[u8]) -> f64 {
-    let (mut sum, mut n) = (0.0, 0usize);
-    for (d, s) in decoded.chunks_exact(4).zip(source.chunks_exact(4)) {
-        let channels = if s[3] > 0 { 0..4 } else { 3..4 };
-        for k in channels {
-            sum += (f64::from(d[k]) - f64::from(s[k])).powi(2);
-            n += 1;
-        }
-    }
-    10.0 * (255.0f64.powi(2) / (sum / n.max(1) as f64).max(1e-12)).log10()
 }
 
 #[test]
