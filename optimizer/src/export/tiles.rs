@@ -25,6 +25,9 @@
 //! the viewer. The grouping guarantees no object's geometry is written
 //! twice and every impostor appears exactly once.
 //!
+//! Each impostor's content has an atlas of its own, just large enough for
+//! its layers.
+//!
 //! Geometric errors are chosen so that refinement follows the request
 //! volumes alone: with the job's camera and the customary 16-pixel
 //! screen-space error limit, every cluster tile asks to be refined from
@@ -306,7 +309,13 @@ pub fn export(scene: &Scene, geom: &SceneGeometry, input: &TilesInput<'_>) -> Re
     let mut all = view_space;
     let mut children = Vec::with_capacity(groups.len());
     let mut child_boxes = Vec::with_capacity(groups.len());
-    let opts = BakeOptions::default();
+    // A content holds one impostor: its atlas just holds its layers
+    // (⌈√n⌉ a side), not the bake's 4096-texel-wide shared page, which
+    // would leave most of every impostor's texture empty.
+    let opts = BakeOptions {
+        atlas_size: 0,
+        ..BakeOptions::default()
+    };
     for (g, (objects, impostors)) in groups.iter().enumerate() {
         for &o in objects {
             replaced[o as usize] = true;
