@@ -460,16 +460,16 @@ fn the_small_citys_tileset_loads_and_refines_in_3d_tiles_renderer() {
         // The viewer is in the impostor's view cell, so in its request
         // volume.
         assert!(inside(request[id], z_up(from)), "impostor {id}");
-        // The root refines, so every group tile is visited; one out of view
-        // (no child's box in the frustum) is not drawn, nor its impostors.
-        assert!(g.visited, "impostor {id}'s group tile not visited: {g:?}");
+        // The root refines, so every group tile's state is this update's;
+        // one out of view (no child's box in the frustum) is not drawn,
+        // nor its impostors.
+        assert!(g.visited, "impostor {id}'s group tile is stale: {g:?}");
         if !g.in_frustum {
             assert!(!t.visible && !g.visible, "impostor {id}: {t:?} {g:?}");
             continue;
         }
         // In view and near: the group refines into its impostors, and its
         // geometry is not drawn (REPLACE).
-        assert!(t.visited, "impostor {id}'s group did not refine: {g:?}");
         assert!(
             !g.visible && !g.active,
             "impostor {id}'s group geometry drawn too: {g:?}"

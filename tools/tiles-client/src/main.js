@@ -108,12 +108,14 @@ function listTiles() {
       // The content is parsed and held (it may still be undrawn).
       loaded: tile.internal.loadingState === LOADED,
       failed: tile.internal.loadingState === FAILED,
-      // The last update's traversal: whether it reached the tile (a
-      // child of a tile that did not refine is not visited, and its other
-      // traversal fields are then stale), its bounding volume in the
-      // frustum, its screen-space error, in the set the renderer displays
-      // (`active`) and drawn (`visible`: active, in the frustum and loaded,
-      // its scene added to the tiles' group).
+      // The last update's traversal: whether it reset the tile's state
+      // (it does for the tiles it reaches and the children of the tiles
+      // it uses; the other fields of a tile it did not reset are stale),
+      // its bounding volume in the frustum (false where the traversal did
+      // not test it, e.g. below a tile that did not refine), its
+      // screen-space error, in the set the renderer displays (`active`)
+      // and drawn (`visible`: active, in the frustum and loaded, its scene
+      // added to the tiles' group).
       visited: t.lastFrameVisited === tiles.frameCount,
       inFrustum: t.lastFrameVisited === tiles.frameCount && Boolean(t.inFrustum),
       error: t.lastFrameVisited === tiles.frameCount && Number.isFinite(t.error) ? t.error : null,
