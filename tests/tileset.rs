@@ -3,7 +3,8 @@
 //! run): every content file exists and passes the Khronos glTF validator,
 //! every impostor appears exactly once under a REPLACE cluster tile with a
 //! request volume holding its view cell (in the z-up frame), bounding
-//! volumes hold their children's and geometric errors decrease downwards.
+//! volumes hold their children's and geometric errors decrease downwards,
+//! and each impostor's atlas is sized to its layers.
 
 use std::collections::BTreeSet;
 use std::path::Path;
@@ -235,6 +236,26 @@ fn tileset_replaces_clusters_by_impostors_inside_their_cells() {
         assert_eq!(r["numErrors"], 0, "{file}: {r}");
     }
     assert_eq!(report.as_object().unwrap().len(), files.len());
+    // Each impostor's content has an atlas of its own, no larger than a
+    // square of ⌈√layers⌉ layers a side (resolution and two 4-texel
+    // gutters each; the height rounded up to a multiple of 4).
+    for imp in placement["impostors"].as_array().unwrap() {
+        let glb = std::fs::read(out.join(format!("impostor-{}.glb", imp["id"]))).unwrap();
+        let at = glb
+            .windows(8)
+            .position(|w| w == b"\x89PNG\r\n\x1a\n")
+            .expect("a PNG atlas");
+        let be = |k: usize| u32::from_be_bytes(glb[at + k..at + k + 4].try_into().unwrap());
+        let (w, h) = (be(16), be(20));
+        let side = imp["resolution"].as_u64().unwrap() as u32 + 8;
+        let per = (imp["layers"].as_u64().unwrap() as f64).sqrt().ceil() as u32;
+        assert!(
+            w <= per * side && h <= per * side + 3,
+            "impostor {}: a {w}×{h} atlas for {} layers of {side} texels",
+            imp["id"],
+            imp["layers"]
+        );
+    }
 
     // Controls: the checks fail on a shrunken request volume, a child box
     // grown beyond its parent, and a duplicated impostor.

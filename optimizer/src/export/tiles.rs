@@ -14,16 +14,30 @@
 //!   a box around its view cell (the cell itself for box cells; for shafts
 //!   the box bounding the shaft's part inside the view space).
 //!
-//! A child outside its request volume is neither requested nor refined
-//! into, so outside the view cells the cluster's geometry is drawn and
-//! inside a group's only view cell its impostor replaces it: the
-//! placement's switch exactly. A REPLACE tile refines into its children
-//! only where all of them may be drawn, so for a group of several
-//! impostors 3D Tiles cannot say "the geometry unless inside any one of
-//! the cells" (volumes cannot be unions or complements); runtimes such as
-//! CesiumJS then keep the geometry and add the impostor whose volume holds
-//! the viewer. The grouping guarantees no object's geometry is written
-//! twice and every impostor appears exactly once.
+//! Where a runtime honours request volumes, a child outside its request
+//! volume is neither requested nor refined into, so outside the view cells
+//! the cluster's geometry is drawn and inside a group's only view cell its
+//! impostor replaces it: the placement's switch exactly. A REPLACE tile
+//! refines into its children only where all of them may be drawn, so for a
+//! group of several impostors 3D Tiles cannot say "the geometry unless
+//! inside any one of the cells" (volumes cannot be unions or complements).
+//! CesiumJS's base traversal (read from its source, not run here) then
+//! keeps the geometry, and as it selects no child of a REPLACE tile that
+//! does not refine, draws none of the group's impostors. The grouping
+//! guarantees no object's geometry is written twice and every impostor
+//! appears exactly once.
+//!
+//! Not every runtime honours request volumes. NASA-AMMOS's
+//! `3d-tiles-renderer` (0.5.3; `server/tests/tiles_client.rs` loads the
+//! small city's tileset in it) ignores them (its issue #74) and refines by
+//! screen-space error alone: within reach of a group (the geometric errors
+//! below) it draws every impostor of the group whose box is in view,
+//! whichever view cell holds the viewer, and not the group's geometry;
+//! farther away it draws the geometry and none of the impostors. The test
+//! asserts exactly that, so a change on either side shows.
+//!
+//! Each impostor's content has an atlas of its own, just large enough for
+//! its layers.
 //!
 //! Geometric errors are chosen so that refinement follows the request
 //! volumes alone: with the job's camera and the customary 16-pixel
@@ -306,7 +320,13 @@ pub fn export(scene: &Scene, geom: &SceneGeometry, input: &TilesInput<'_>) -> Re
     let mut all = view_space;
     let mut children = Vec::with_capacity(groups.len());
     let mut child_boxes = Vec::with_capacity(groups.len());
-    let opts = BakeOptions::default();
+    // A content holds one impostor: its atlas just holds its layers
+    // (⌈√n⌉ a side), not the bake's 4096-texel-wide shared page, which
+    // would leave most of every impostor's texture empty.
+    let opts = BakeOptions {
+        atlas_size: 0,
+        ..BakeOptions::default()
+    };
     for (g, (objects, impostors)) in groups.iter().enumerate() {
         for &o in objects {
             replaced[o as usize] = true;
