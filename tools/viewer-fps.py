@@ -6,10 +6,11 @@ software WebGL), on a baked job of a running impostor-server:
 
 Opens the job's viewer through tools/chromium-cdp.py and measures, on a
 960 x 600 canvas:
-  - draw time per frame over FRAMES frames of the job's walkthrough path
-    (`impostorViewer.walkFrame`; each frame drawn and waited for by reading
-    one pixel back), with the placement's impostors and with the scene
-    alone (the viewer's "without impostors" toggle);
+  - draw time per frame over FRAMES views in CPVs with impostors (spread
+    over the placement's list, each from its region's centre along its
+    VDI's centre; each frame drawn and waited for by reading one pixel
+    back), with the placement's impostors and with the scene alone (the
+    viewer's "without impostors" toggle);
   - the page's frame rate while walking the path in real time (animation
     frames counted over 10 s), both ways.
 Prints one JSON object. `tools/viewer-fps.sh` starts a server and submits
@@ -49,13 +50,28 @@ js(r"""new Promise((ok, no) => { const t = setInterval(() => {
   if (v && v.dataset.ready === 'true') { clearInterval(t); ok(true); } }, 200); })""")
 
 DRAW = """(() => { const v = impostorViewer, gl = v.renderer.getContext(), px = new Uint8Array(4);
-  v.setPlain(%s); v.walkFrame(0, %d); gl.readPixels(0, 0, 1, 1, gl.RGBA, gl.UNSIGNED_BYTE, px);
+  const n = %d, plain = %s;
+  // Views in CPVs with impostors, spread over the placement's list: each
+  // from its region's centre along its VDI's centre.
+  const cpvs = v.placement.cpvs.filter((c) => c.impostors.length > 0);
+  const views = [];
+  for (let i = 0; i < Math.min(n, cpvs.length); i++) {
+    const c = cpvs[Math.floor((i * cpvs.length) / Math.min(n, cpvs.length))], r = c.region, d = c.directions;
+    const axis = d.face >> 1, dir = [0, 0, 0], rest = [0, 1, 2].filter((a) => a !== axis);
+    dir[axis] = d.face %% 2 === 0 ? 1 : -1;
+    dir[rest[0]] = (d.u[0] + d.u[1]) / 2;
+    dir[rest[1]] = (d.v[0] + d.v[1]) / 2;
+    views.push([[0, 1, 2].map((a) => (r.min[a] + r.max[a]) / 2), dir]);
+  }
+  v.setPlain(plain);
+  v.lookFrom(...views[0]); gl.readPixels(0, 0, 1, 1, gl.RGBA, gl.UNSIGNED_BYTE, px);
   const t0 = performance.now(); let shown = 0;
-  for (let i = 0; i < %d; i++) {
-    v.walkFrame(i, %d); gl.readPixels(0, 0, 1, 1, gl.RGBA, gl.UNSIGNED_BYTE, px);
+  for (const [p, d] of views) {
+    v.lookFrom(p, d); gl.readPixels(0, 0, 1, 1, gl.RGBA, gl.UNSIGNED_BYTE, px);
     shown += Number(v.root.dataset.visibleImpostorNodes || 0);
   }
-  return { ms_per_frame: (performance.now() - t0) / %d, impostors_per_frame: shown / %d }; })()"""
+  return { views: views.length, ms_per_frame: (performance.now() - t0) / views.length,
+           impostors_per_frame: shown / views.length }; })()"""
 WALK = """new Promise((ok) => { const v = impostorViewer; v.setPlain(%s);
   if (!v.walk) v.toggleWalk();
   let n = 0; const t0 = performance.now();
@@ -69,7 +85,7 @@ out = {"frames": frames, "canvas": [960, 600],
 print("viewer-fps: the viewer is open (%d objects, %d triangles)" % (out["objects"], out["triangles"]),
       file=sys.stderr)
 for name, plain in (("with_impostors", "false"), ("without_impostors", "true")):
-    out[name] = js(DRAW % (plain, frames, frames, frames, frames, frames), timeout=3600)
+    out[name] = js(DRAW % (frames, plain), timeout=3600)
     print("viewer-fps: %s: %s" % (name, out[name]), file=sys.stderr)
     out[name].update(js(WALK % plain, timeout=900))
 out["problems"] = send("bridge.problems")
