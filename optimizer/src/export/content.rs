@@ -5,9 +5,8 @@ use std::collections::BTreeMap;
 
 use glam::DMat4;
 
-use crate::bake::encode_png;
 use crate::scene::geometry::SceneGeometry;
-use crate::scene::glb::{self, GeometryId, GlbBuilder, MeshPrimitive, Node, Sampler};
+use crate::scene::glb::{self, GeometryId, GlbBuilder, MeshPrimitive, Node};
 use crate::{Error, Result};
 
 /// Per object id, its instance indices.
@@ -113,14 +112,7 @@ fn texture(
         .textures
         .get(t as usize)
         .ok_or_else(|| Error::Internal(format!("{what}: texture {t} does not exist")))?;
-    let png = encode_png(&tex.rgba, tex.width, tex.height)?;
-    let image = b.add_image_png(&format!("texture {t}"), &png)?;
-    let sampler = b.add_sampler(&Sampler {
-        wrap_s: tex.wrap_s,
-        wrap_t: tex.wrap_t,
-        ..Sampler::default()
-    })?;
-    let index = b.add_texture(image, Some(sampler))?;
+    let index = b.add_loaded_texture(&format!("texture {t}"), tex)?;
     written.insert(t, index);
     Ok(index)
 }

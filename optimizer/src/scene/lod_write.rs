@@ -36,7 +36,7 @@ use crate::api::job::LodParams;
 use crate::api::stats::LodReport;
 use crate::scene::Scene;
 use crate::scene::geometry::SceneGeometry;
-use crate::scene::glb::{self, GlbBuilder, MeshPrimitive, Node, Sampler};
+use crate::scene::glb::{self, GlbBuilder, MeshPrimitive, Node};
 use crate::scene::lod::{Simplified, generate_kept, simplify_levels};
 use crate::{Error, Result};
 
@@ -210,14 +210,7 @@ pub fn write_lod_glb(
 fn add_materials(b: &mut GlbBuilder, geom: &SceneGeometry) -> Result<Vec<Option<u32>>> {
     let mut textures = Vec::with_capacity(geom.textures.len());
     for (t, tex) in geom.textures.iter().enumerate() {
-        let png = glb::encode_png(&tex.rgba, tex.width, tex.height)?;
-        let image = b.add_image_png(&format!("texture {t}"), &png)?;
-        let sampler = b.add_sampler(&Sampler {
-            wrap_s: tex.wrap_s,
-            wrap_t: tex.wrap_t,
-            ..Sampler::default()
-        })?;
-        textures.push(b.add_texture(image, Some(sampler))?);
+        textures.push(b.add_loaded_texture(&format!("texture {t}"), tex)?);
     }
     let last = geom.materials.len().saturating_sub(1);
     geom.materials

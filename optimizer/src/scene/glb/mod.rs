@@ -261,6 +261,26 @@ pub struct GlbBuilder {
     extensions_required: BTreeSet<String>,
 }
 
+impl GlbBuilder {
+    /// Writes a loaded scene texture (its RGBA8 texels as a PNG image, its
+    /// wrapping as a sampler) and returns the new texture's index; `name`
+    /// names the image.
+    pub fn add_loaded_texture(
+        &mut self,
+        name: &str,
+        tex: &crate::scene::geometry::Texture,
+    ) -> Result<u32> {
+        let png = encode_png(&tex.rgba, tex.width, tex.height)?;
+        let image = self.add_image_png(name, &png)?;
+        let sampler = self.add_sampler(&Sampler {
+            wrap_s: tex.wrap_s,
+            wrap_t: tex.wrap_t,
+            ..Sampler::default()
+        })?;
+        self.add_texture(image, Some(sampler))
+    }
+}
+
 fn bad(what: &str, message: impl Into<String>) -> Error {
     Error::bad(format!("GLB writer: {what}"), message)
 }
