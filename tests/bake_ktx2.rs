@@ -181,22 +181,14 @@ fn ktx2_bake_validates_and_decodes_to_the_png_atlases() {
     }
     let image = |glb: &std::path::Path, name: &str| {
         let out = dir.join(name);
-        let o = run(&[
-            "evaluate",
-            s(&city),
-            "--job",
-            s(&job),
-            "--placement",
-            s(&p),
-            "--views",
-            "50",
-            "--images",
-            "24",
-            "--impostors",
-            s(glb),
-            "-o",
-            s(&out),
-        ]);
+        let o = evaluate_with(
+            &city,
+            &job,
+            &p,
+            &out,
+            50,
+            &["--images", "24", "--impostors", s(glb)],
+        );
         assert_eq!(code(&o), 0, "{}", stderr(&o));
         read_json(&out)["image"].clone()
     };

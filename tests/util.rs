@@ -113,8 +113,20 @@ pub fn bake(scene: &Path, placement: &Path, job: &Path, glb: &Path, report: &Pat
 
 /// Runs `impostor evaluate SCENE --job JOB --placement P -o OUT --views N`.
 pub fn evaluate(scene: &Path, job: &Path, placement: &Path, out: &Path, views: u32) -> Output {
+    evaluate_with(scene, job, placement, out, views, &[])
+}
+
+/// [`evaluate`] with `extra` arguments.
+pub fn evaluate_with(
+    scene: &Path,
+    job: &Path,
+    placement: &Path,
+    out: &Path,
+    views: u32,
+    extra: &[&str],
+) -> Output {
     let views = views.to_string();
-    run(&[
+    let mut args = vec![
         "evaluate",
         s(scene),
         "--job",
@@ -125,7 +137,9 @@ pub fn evaluate(scene: &Path, job: &Path, placement: &Path, out: &Path, views: u
         s(out),
         "--views",
         &views,
-    ])
+    ];
+    args.extend_from_slice(extra);
+    run(&args)
 }
 
 /// The figures of a guarantee check and its control.
