@@ -14,18 +14,13 @@
 //! The mip chain is the caller's (see [`super::mips`]): the encoder is given
 //! every level and generates none.
 
-use basis_universal::{
-    BasisTextureFormat, ColorSpace, Compressor, CompressorParams, DecodeFlags,
-    LowLevelUastcTranscoder, SliceParametersUastc, TranscoderBlockFormat,
-};
+use basis_universal::{BasisTextureFormat, ColorSpace, Compressor, CompressorParams};
 
 use super::mips::MipLevel;
+use crate::scene::glb::{BLOCK_BYTES, blocks};
+pub use crate::scene::glb::{KTX2_IDENTIFIER, decode_ktx2, decode_uastc};
 use crate::{Error, Result};
 
-/// The KTX 2.0 file identifier.
-pub const KTX2_IDENTIFIER: [u8; 12] = [
-    0xAB, b'K', b'T', b'X', b' ', b'2', b'0', 0xBB, b'\r', b'\n', 0x1A, b'\n',
-];
 /// Khronos Data Format colour model of UASTC.
 const KHR_DF_MODEL_UASTC: u8 = 166;
 /// UASTC channel type: RGBA.
@@ -36,18 +31,11 @@ const KHR_DF_CHANNEL_UASTC_RGB: u8 = 0;
 const KHR_DF_PRIMARIES_BT709: u8 = 1;
 /// The sRGB transfer function.
 const KHR_DF_TRANSFER_SRGB: u8 = 2;
-/// Bytes of one UASTC 4×4 block.
-const BLOCK_BYTES: usize = 16;
 /// The writer named in the `KTXwriter` entry.
 const WRITER: &str = concat!("impostor ", env!("CARGO_PKG_VERSION"));
 
 fn internal(m: impl Into<String>) -> Error {
     Error::Internal(format!("KTX2 encoding: {}", m.into()))
-}
-
-/// Blocks of a `w × h` level.
-fn blocks(w: u32, h: u32) -> (u32, u32) {
-    (w.div_ceil(4), h.div_ceil(4))
 }
 
 /// Encodes a mip chain (level 0 first, each level half the previous, sides
@@ -253,81 +241,6 @@ fn write_container(width: u32, height: u32, has_alpha: bool, data: &[Vec<u8>]) -
         out.extend_from_slice(&data[k]);
     }
     out
-}
-
-/// Decodes the UASTC blocks of a `width × height` level to RGBA8 texels
-/// (rows from the top) with Binomial's transcoder.
-pub fn decode_uastc(blocks_data: &[u8], width: u32, height: u32) -> Result<Vec<u8>> {
-    let (bx, by) = blocks(width, height);
-    if blocks_data.len() != (bx * by) as usize * BLOCK_BYTES {
-        return Err(internal(format!(
-            "{} bytes are not the UASTC blocks of {width}×{height} texels",
-            blocks_data.len()
-        )));
-    }
-    // `basis-universal` 0.3 passes the output row pitch of an uncompressed
-    // target as `original_width / 4` (in blocks) while the transcoder reads
-    // it in pixels, and sizes the buffer by that pitch; a width of 4 × the
-    // real one gives the transcoder the right pitch and the buffer the right
-    // size (the transcoder reads no other use of the width for RGBA32).
-    let t = LowLevelUastcTranscoder::new();
-    let rgba = t
-        .transcode_slice(
-            blocks_data,
-            SliceParametersUastc {
-                num_blocks_x: bx,
-                num_blocks_y: by,
-                has_alpha: true,
-                original_width: width * 4,
-                original_height: height,
-            },
-            DecodeFlags::HIGH_QUALITY,
-            TranscoderBlockFormat::RGBA32,
-        )
-        .map_err(|e| internal(format!("UASTC decoding failed: {e:?}")))?;
-    if rgba.len() != (width * height * 4) as usize {
-        return Err(internal("the transcoder returned a wrong size"));
-    }
-    Ok(rgba)
-}
-
-/// Level 0 of a KTX2 file of UASTC content (as `bake --textures ktx2`
-/// writes, or any 2D KTX2 file with UASTC blocks and no
-/// supercompression) decoded to RGBA8 texels, rows from the top, once its
-/// size has passed `check(width, height)`. `what` names the image in
-/// errors.
-pub fn decode_ktx2(
-    bytes: &[u8],
-    what: &str,
-    check: impl FnOnce(u32, u32) -> Result<()>,
-) -> Result<(u32, u32, Vec<u8>)> {
-    let bad = |m: String| Error::bad(what, m);
-    let r = ktx2::Reader::new(bytes).map_err(|e| bad(format!("not a readable KTX2 file: {e}")))?;
-    let h = r.header();
-    if r.color_model() != Some(ktx2::ColorModel::UASTC) || h.format.is_some() {
-        return Err(bad(format!(
-            "KTX2 content {:?} is not supported (only Basis Universal UASTC is read)",
-            h.format
-                .map_or_else(|| format!("{:?}", r.color_model()), |f| format!("{f:?}"))
-        )));
-    }
-    if let Some(scheme) = h.supercompression_scheme {
-        return Err(bad(format!(
-            "KTX2 supercompression {scheme:?} is not supported (only uncompressed UASTC levels are read)"
-        )));
-    }
-    if h.pixel_depth > 1 || h.layer_count > 1 || h.face_count != 1 || h.pixel_height == 0 {
-        return Err(bad("only a single 2D KTX2 image is read".into()));
-    }
-    let (w, ht) = (h.pixel_width, h.pixel_height);
-    check(w, ht)?;
-    let level = r
-        .levels()
-        .next()
-        .ok_or_else(|| bad("the KTX2 file has no levels".into()))?;
-    let rgba = decode_uastc(level.data, w, ht)
-        .map_err(|e| bad(format!("its UASTC level 0 does not decode: {e}")))?;
-    Ok((w, ht, rgba))
 }
 
 /// Peak signal-to-noise ratio of a decoded RGBA8 image against its source,

@@ -355,8 +355,8 @@ fn decode_image(
         *budget -= size;
         Ok(())
     };
-    if bytes.starts_with(&crate::bake::ktx2::KTX2_IDENTIFIER) {
-        return crate::bake::ktx2::decode_ktx2(&bytes, what, |w, h| check(w, h, budget));
+    if bytes.starts_with(&crate::scene::glb::KTX2_IDENTIFIER) {
+        return crate::scene::glb::decode_ktx2(&bytes, what, |w, h| check(w, h, budget));
     }
     let reader = image::ImageReader::new(Cursor::new(&*bytes))
         .with_guessed_format()

@@ -39,6 +39,8 @@ mod nodes;
 mod read;
 mod write;
 
+pub(crate) use basisu::{BLOCK_BYTES, blocks};
+pub use basisu::{KTX2_IDENTIFIER, decode_ktx2, decode_uastc};
 pub(crate) use read::{object_extras, scene_extras};
 pub use write::encode_png;
 
