@@ -16,20 +16,7 @@ fn bake_as(
     report: &std::path::Path,
     format: &str,
 ) -> std::process::Output {
-    run(&[
-        "bake",
-        s(scene),
-        "--placement",
-        s(p),
-        "--job",
-        s(job),
-        "-o",
-        s(glb),
-        "--report",
-        s(report),
-        "--textures",
-        format,
-    ])
+    bake_with(scene, p, job, glb, report, &["--textures", format])
 }
 
 /// The JSON document and binary chunk of a GLB.

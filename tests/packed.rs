@@ -74,6 +74,27 @@ fn facts(i: &serde_json::Value) -> (u64, u64, u64) {
     (n("objects"), n("triangles"), n("draw_calls"))
 }
 
+/// Asserts that `keys` of two placements' summaries differ by at most 3 %
+/// of the larger (`name_a`, `name_b` name them in the message).
+fn assert_summaries_close(
+    a: &serde_json::Value,
+    b: &serde_json::Value,
+    keys: &[&str],
+    name_a: &str,
+    name_b: &str,
+) {
+    for key in keys {
+        let (x, y) = (
+            a["summary"][key].as_f64().unwrap(),
+            b["summary"][key].as_f64().unwrap(),
+        );
+        assert!(
+            (x - y).abs() <= 0.03 * x.max(y),
+            "{key}: {x} {name_a} vs {y} {name_b}"
+        );
+    }
+}
+
 #[test]
 fn gltfpack_output_loads_and_places_like_the_original() {
     let dir = tmp("packed");
@@ -153,16 +174,13 @@ fn gltfpack_output_loads_and_places_like_the_original() {
     // dequantization transform does (objects 34× too large: the placement
     // of a different scene).
     let (a, b) = (read_json(&p_noq), read_json(&p_q));
-    for key in ["cpvs", "memory_bytes"] {
-        let (x, y) = (
-            a["summary"][key].as_f64().unwrap(),
-            b["summary"][key].as_f64().unwrap(),
-        );
-        assert!(
-            (x - y).abs() <= 0.03 * x.max(y),
-            "{key}: {x} unquantized vs {y} quantized"
-        );
-    }
+    assert_summaries_close(
+        &a,
+        &b,
+        &["cpvs", "memory_bytes"],
+        "unquantized",
+        "quantized",
+    );
     assert_eq!(b["summary"]["unsolved_cpvs"], a["summary"]["unsolved_cpvs"]);
 }
 
@@ -241,15 +259,12 @@ fn a_packed_real_scene_places_like_the_original() {
     assert_same_file(&p_orig, &placed(&noq, "p-noq.json"));
     let (a, b) = (read_json(&p_orig), read_json(&placed(&q, "p-q.json")));
     assert!(a["summary"]["impostors"].as_u64().unwrap() > 100);
-    for key in ["cpvs", "impostors", "memory_bytes"] {
-        let (x, y) = (
-            a["summary"][key].as_f64().unwrap(),
-            b["summary"][key].as_f64().unwrap(),
-        );
-        assert!(
-            (x - y).abs() <= 0.03 * x.max(y),
-            "{key}: {x} original vs {y} quantized"
-        );
-    }
+    assert_summaries_close(
+        &a,
+        &b,
+        &["cpvs", "impostors", "memory_bytes"],
+        "original",
+        "quantized",
+    );
     assert_eq!(b["summary"]["unsolved_cpvs"], 0);
 }

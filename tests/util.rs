@@ -97,7 +97,19 @@ pub fn place(scene: &Path, job: &Path, out: &Path, extra: &[&str]) -> Output {
 
 /// Runs `impostor bake SCENE --placement P --job JOB -o GLB --report R`.
 pub fn bake(scene: &Path, placement: &Path, job: &Path, glb: &Path, report: &Path) -> Output {
-    run(&[
+    bake_with(scene, placement, job, glb, report, &[])
+}
+
+/// [`bake`] with `extra` arguments.
+pub fn bake_with(
+    scene: &Path,
+    placement: &Path,
+    job: &Path,
+    glb: &Path,
+    report: &Path,
+    extra: &[&str],
+) -> Output {
+    let mut args = vec![
         "bake",
         s(scene),
         "--placement",
@@ -108,7 +120,9 @@ pub fn bake(scene: &Path, placement: &Path, job: &Path, glb: &Path, report: &Pat
         s(glb),
         "--report",
         s(report),
-    ])
+    ];
+    args.extend_from_slice(extra);
+    run(&args)
 }
 
 /// Runs `impostor evaluate SCENE --job JOB --placement P -o OUT --views N`.

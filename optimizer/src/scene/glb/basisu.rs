@@ -45,16 +45,7 @@ impl GlbBuilder {
         if !ktx2.starts_with(&KTX2_IDENTIFIER) {
             return Err(bad(&format!("image '{name}'"), "not a KTX2 file"));
         }
-        let view = self.push_view(ktx2, None)?;
-        self.root.images.push(gj::Image {
-            buffer_view: Some(gj::Index::new(view)),
-            mime_type: Some(gj::image::MimeType("image/ktx2".into())),
-            name: (!name.is_empty()).then(|| name.to_string()),
-            uri: None,
-            extensions: None,
-            extras: None,
-        });
-        last_index(&self.root.images, "images")
+        self.push_image(name, ktx2, "image/ktx2")
     }
 
     /// Adds a `KHR_texture_basisu` texture of a KTX2 image (from

@@ -365,10 +365,16 @@ impl GlbBuilder {
         if !png.starts_with(&SIGNATURE) {
             return Err(bad(&format!("image '{name}'"), "not a PNG file"));
         }
-        let view = self.push_view(png, None)?;
+        self.push_image(name, png, "image/png")
+    }
+
+    /// Adds an image of `mime` type whose `bytes` are stored in the binary
+    /// buffer and returns its index (the callers check the bytes).
+    pub(super) fn push_image(&mut self, name: &str, bytes: &[u8], mime: &str) -> Result<u32> {
+        let view = self.push_view(bytes, None)?;
         self.root.images.push(gj::Image {
             buffer_view: Some(gj::Index::new(view)),
-            mime_type: Some(gj::image::MimeType("image/png".into())),
+            mime_type: Some(gj::image::MimeType(mime.into())),
             name: (!name.is_empty()).then(|| name.to_string()),
             uri: None,
             extensions: None,
