@@ -53,8 +53,9 @@ enum Command {
     /// write them as one GLB with texture atlases.
     Bake(bake::BakeArgs),
     /// Export a placement and its baked impostors as a 3D Tiles 1.1
-    /// tileset: cluster geometry tiles refined (REPLACE) into impostor
-    /// tiles inside their view cells.
+    /// tileset: cluster geometry tiles refined (REPLACE) into boxes of
+    /// viewer positions (request volumes) drawing the placement's
+    /// impostors there.
     Tiles(tiles::TilesArgs),
     /// Generate a seeded, Vienna-like procedural city.
     GenCity(gen_city::GenCityArgs),

@@ -11,5 +11,7 @@ npm ci --prefix tools/gltf-validator
 npm ci --prefix tools/gltfpack
 npm ci --prefix tools/tiles-client
 node tools/tiles-client/build.mjs
+npm ci --prefix tools/cesium-client
+node tools/cesium-client/build.mjs
 cargo test --workspace --release
 IMPOSTOR_TEST_DATABASE=postgres cargo test --release -p server --test http --test admission

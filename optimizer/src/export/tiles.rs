@@ -2,49 +2,53 @@
 //! whose contents are GLB files (glTF content, as 3D Tiles 1.1 allows
 //! without extension).
 //!
-//! The hierarchy makes REPLACE refinement carry the placement's switch:
+//! The hierarchy carries the placement's switch in request volumes and
+//! refinement, as a runtime that honours `viewerRequestVolume` (CesiumJS)
+//! reads them:
 //!
 //! - the root (refinement ADD) draws the objects no impostor replaces;
 //! - per *cluster group* (impostors whose object sets meet, joined: a
 //!   cluster's impostors for its several view cells and those of its
 //!   nested sub-clusters), a *cluster tile* (refinement REPLACE) draws the
-//!   group's geometry, each object once;
-//! - each impostor is one child of its group's cluster tile, an *impostor
-//!   tile* whose content is its layers and whose `viewerRequestVolume` is
-//!   a box around its view cell (the cell itself for box cells; for shafts
-//!   the box bounding the shaft's part inside the view space).
+//!   group's geometry; its one child, the *switch*, has no content and
+//!   the box of the CPV regions that draw any of the group's impostors as
+//!   request volume;
+//! - below it, a k-d tree of boxes of viewer positions
+//!   ([`super::switch`]; refinement ADD, no content, each box its request
+//!   volume) whose leaves hold what the group draws from there: the
+//!   impostors the placement draws in CPVs whose regions hold the leaf, and
+//!   a content with the group's objects none of them replaces (or the
+//!   whole group's geometry where none is drawn).
 //!
-//! Where a runtime honours request volumes, a child outside its request
-//! volume is neither requested nor refined into, so outside the view cells
-//! the cluster's geometry is drawn and inside a group's only view cell its
-//! impostor replaces it: the placement's switch exactly. A REPLACE tile
-//! refines into its children only where all of them may be drawn, so for a
-//! group of several impostors 3D Tiles cannot say "the geometry unless
-//! inside any one of the cells" (volumes cannot be unions or complements).
-//! CesiumJS's base traversal (read from its source, not run here) then
-//! keeps the geometry, and as it selects no child of a REPLACE tile that
-//! does not refine, draws none of the group's impostors. The grouping
-//! guarantees no object's geometry is written twice and every impostor
-//! appears exactly once.
+//! Inside the switch's box the viewer is in exactly one leaf (up to shared
+//! faces), so the group draws that leaf's contents; outside it the switch
+//! is outside its request volume, the cluster tile does not refine (a
+//! REPLACE tile refines only when all its children may be drawn) and draws
+//! the group's geometry. A leaf lies inside the regions of the CPVs it
+//! takes impostors from, so inside those impostors' view cells. What 3D
+//! Tiles cannot carry is the view direction: a leaf draws the impostors of
+//! every CPV of its region, whichever way the viewer looks (where two
+//! replace common objects, the one replacing more). An impostor's content
+//! is one file, referenced by every leaf drawing it; the geometry of a
+//! group's objects left beside impostors is one file per distinct set.
 //!
 //! Not every runtime honours request volumes. NASA-AMMOS's
 //! `3d-tiles-renderer` (0.5.3; `server/tests/tiles_client.rs` loads the
 //! small city's tileset in it) ignores them (its issue #74) and refines by
 //! screen-space error alone: within reach of a group (the geometric errors
-//! below) it draws every impostor of the group whose box is in view,
-//! whichever view cell holds the viewer, and not the group's geometry;
-//! farther away it draws the geometry and none of the impostors. The test
-//! asserts exactly that, so a change on either side shows.
+//! below) it draws every leaf's contents at once; farther away it draws the
+//! group's geometry and none of its impostors. `server/tests/cesium_client.rs`
+//! runs the tileset in CesiumJS and checks the switch view by view.
 //!
 //! Each impostor's content has an atlas of its own, just large enough for
 //! its layers.
 //!
 //! Geometric errors are chosen so that refinement follows the request
 //! volumes alone: with the job's camera and the customary 16-pixel
-//! screen-space error limit, every cluster tile asks to be refined from
-//! anywhere its volumes reach; the impostor tiles are leaves (error 0) and
-//! the root's error is twice the largest below it, so errors decrease
-//! downwards.
+//! screen-space error limit, every cluster tile and every tile of its
+//! switch asks to be refined from anywhere the switch reaches; the
+//! contents below the leaves have error 0 and the root's error is twice
+//! the largest below it, so errors do not increase downwards.
 //!
 //! Coordinates: glTF content is y-up; 3D Tiles is z-up and runtimes turn
 //! glTF content from y-up to z-up (a rotation of +90° about x, `(x, y, z)
@@ -56,8 +60,9 @@ use serde::{Deserialize, Serialize};
 use serde_json::{Value, json};
 
 use super::content::{instances_by_object, objects_glb};
+use super::switch::{GroupTiles, Switch, group_switch};
 use crate::api::job::Job;
-use crate::api::placement::{PlacedImpostor, Placement, Summary, ViewCellJson};
+use crate::api::placement::{Placement, Summary};
 use crate::bake::{BakeOptions, Layer, read_layers, write_glb};
 use crate::scene::Scene;
 use crate::scene::geometry::SceneGeometry;
@@ -108,9 +113,11 @@ pub struct Tile {
     /// Children.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub children: Vec<Tile>,
-    /// What the tile is: `{"impostor": id}` for impostor tiles,
-    /// `{"cluster": node, "impostor": id, "objects": [...]}` for cluster
-    /// tiles.
+    /// What the tile is: `{"impostors": [ids], "objects": [ids]}` for
+    /// cluster tiles, `{"impostors": [ids]}` for switch leaves (the
+    /// impostors drawn there), `{"impostor": id, "cluster": node}` for an
+    /// impostor's content, `{"objects": [ids]}` for geometry left beside
+    /// impostors.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub extras: Option<Value>,
 }
@@ -121,6 +128,8 @@ pub struct Tile {
 pub enum BoundingVolume {
     /// Centre, then the x, y and z half-axis vectors.
     Box([f64; 12]),
+    /// Centre, then radius.
+    Sphere([f64; 4]),
 }
 
 /// Refinement.
@@ -150,7 +159,7 @@ pub struct Aabb {
 }
 
 impl Aabb {
-    const EMPTY: Aabb = Aabb {
+    pub(super) const EMPTY: Aabb = Aabb {
         min: DVec3::splat(f64::INFINITY),
         max: DVec3::splat(f64::NEG_INFINITY),
     };
@@ -160,21 +169,10 @@ impl Aabb {
         self.max = self.max.max(p);
     }
 
-    fn union(self, o: Aabb) -> Aabb {
+    pub(super) fn union(self, o: Aabb) -> Aabb {
         Aabb {
             min: self.min.min(o.min),
             max: self.max.max(o.max),
-        }
-    }
-
-    fn is_empty(&self) -> bool {
-        (0..3).any(|a| self.min[a] > self.max[a])
-    }
-
-    fn intersection(self, o: Aabb) -> Aabb {
-        Aabb {
-            min: self.min.max(o.min),
-            max: self.max.min(o.max),
         }
     }
 
@@ -187,75 +185,19 @@ impl Aabb {
         let h = ((hi - lo) * 0.5).max(DVec3::splat(1e-3));
         BoundingVolume::Box([c.x, c.y, c.z, h.x, 0.0, 0.0, 0.0, h.y, 0.0, 0.0, 0.0, h.z])
     }
+
+    /// The 3D Tiles sphere around this y-up box, in the z-up frame (radius
+    /// at least a millimetre).
+    pub fn to_tiles_sphere(self) -> BoundingVolume {
+        let c = z_up((self.min + self.max) * 0.5);
+        let r = (0.5 * self.min.distance(self.max)).max(1e-3);
+        BoundingVolume::Sphere([c.x, c.y, c.z, r])
+    }
 }
 
 /// A y-up (glTF) point in the z-up frame of 3D Tiles.
 pub fn z_up(p: DVec3) -> DVec3 {
     DVec3::new(p.x, -p.z, p.y)
-}
-
-/// The box (y-up) a runtime should request an impostor from: the view cell
-/// for box cells; for shafts, the box of the shaft's part inside the view
-/// space (the shaft, truncated where it leaves the view space's farthest
-/// corner, bounded by its apex and its cap disc, and clipped to the view
-/// space).
-pub fn request_box(imp: &PlacedImpostor, view_space: Aabb) -> Aabb {
-    match imp.view_cell {
-        ViewCellJson::Box { min, max } => Aabb {
-            min: DVec3::from_array(min),
-            max: DVec3::from_array(max),
-        },
-        ViewCellJson::Shaft {
-            apex,
-            axis,
-            half_angle_deg,
-            ..
-        } => {
-            let apex = DVec3::from_array(apex);
-            let axis = DVec3::from_array(axis).normalize();
-            let corners = (0..8).map(|k| {
-                DVec3::new(
-                    if k & 1 == 0 {
-                        view_space.min.x
-                    } else {
-                        view_space.max.x
-                    },
-                    if k & 2 == 0 {
-                        view_space.min.y
-                    } else {
-                        view_space.max.y
-                    },
-                    if k & 4 == 0 {
-                        view_space.min.z
-                    } else {
-                        view_space.max.z
-                    },
-                )
-            });
-            let reach = corners.map(|c| c.distance(apex)).fold(0.0, f64::max);
-            let mut cone = Aabb::EMPTY;
-            if half_angle_deg < 89.0 {
-                // Every point of the shaft within `reach` of the apex lies
-                // in the cone up to axial distance `reach`: the convex hull
-                // of the apex and the cap disc.
-                let cap = apex + axis * reach;
-                let r = reach * half_angle_deg.to_radians().tan();
-                let spread = DVec3::new(
-                    (1.0 - axis.x * axis.x).max(0.0).sqrt(),
-                    (1.0 - axis.y * axis.y).max(0.0).sqrt(),
-                    (1.0 - axis.z * axis.z).max(0.0).sqrt(),
-                ) * r;
-                cone.add(apex);
-                cone.add(cap - spread);
-                cone.add(cap + spread);
-            } else {
-                cone.add(apex - DVec3::splat(reach));
-                cone.add(apex + DVec3::splat(reach));
-            }
-            let clipped = cone.intersection(view_space);
-            if clipped.is_empty() { cone } else { clipped }
-        }
-    }
 }
 
 /// The geometric error at which a tile at most `distance` metres from the
@@ -327,74 +269,97 @@ pub fn export(scene: &Scene, geom: &SceneGeometry, input: &TilesInput<'_>) -> Re
         atlas_size: 0,
         ..BakeOptions::default()
     };
+    let switches: Vec<Option<Switch>> = groups
+        .iter()
+        .map(|(_, impostors)| group_switch(placement, impostors))
+        .collect();
+    let mut drawn = vec![false; placement.impostors.len()];
+    for s in switches.iter().flatten() {
+        for (_, ids) in s.leaves() {
+            ids.iter().for_each(|&i| drawn[i as usize] = true);
+        }
+    }
+    // Each impostor some leaf draws as one content, written once however
+    // many leaves draw it.
+    let mut impostor_content: Vec<Option<(Content, Aabb)>> = vec![None; placement.impostors.len()];
+    for (id, own) in layers.iter().enumerate() {
+        if own.is_empty() || !drawn[id] {
+            continue;
+        }
+        let mut quads = Aabb::EMPTY;
+        for l in own {
+            l.corners.iter().for_each(|&c| quads.add(c));
+        }
+        let name = format!("impostor-{id}.glb");
+        files.push((
+            name.clone(),
+            write_glb(
+                placement,
+                own,
+                &geom.object_nodes,
+                Some(&job.view_space),
+                &opts,
+            )?
+            .glb,
+        ));
+        impostor_content[id] = Some((Content { uri: name }, quads));
+    }
     for (g, (objects, impostors)) in groups.iter().enumerate() {
         for &o in objects {
             replaced[o as usize] = true;
         }
-        let mut tile_box = objects
-            .iter()
-            .fold(Aabb::EMPTY, |b, &o| b.union(object_box(o)));
-        let mut reach = tile_box;
-        let mut impostor_tiles = Vec::with_capacity(impostors.len());
+        let group_box = |objects: &[u32]| {
+            objects
+                .iter()
+                .fold(Aabb::EMPTY, |b, &o| b.union(object_box(o)))
+        };
+        let mut tile_box = group_box(objects);
         for &id in impostors {
-            let imp = &placement.impostors[id as usize];
-            let own = &layers[id as usize];
-            let mut quads = Aabb::EMPTY;
-            for l in own {
-                l.corners.iter().for_each(|&c| quads.add(c));
+            if let Some((_, quads)) = &impostor_content[id as usize] {
+                tile_box = tile_box.union(*quads);
             }
-            let content = if own.is_empty() {
-                None
-            } else {
-                let name = format!("impostor-{id}.glb");
-                files.push((
-                    name.clone(),
-                    write_glb(
-                        placement,
-                        own,
-                        &geom.object_nodes,
-                        Some(&job.view_space),
-                        &opts,
-                    )?
-                    .glb,
-                ));
-                Some(Content { uri: name })
-            };
-            let quads = if quads.is_empty() {
-                imp.objects
-                    .iter()
-                    .fold(Aabb::EMPTY, |b, &o| b.union(object_box(o)))
-            } else {
-                quads
-            };
-            let request = request_box(imp, view_space);
-            tile_box = tile_box.union(quads);
-            reach = reach.union(quads).union(request);
-            impostor_tiles.push(Tile {
-                bounding_volume: quads.to_tiles(),
-                viewer_request_volume: Some(request.to_tiles()),
-                geometric_error: 0.0,
-                refine: None,
-                content,
-                children: Vec::new(),
-                extras: Some(json!({ "impostor": id, "cluster": imp.node })),
-            });
         }
+        let switch = &switches[g];
+        let reach = switch
+            .as_ref()
+            .map_or(tile_box, |s| tile_box.union(s.bounds()));
+        // The farthest a viewer in any of its leaves is from it.
+        let error = refining_error(job, reach.min.distance(reach.max));
         let name = format!("cluster-{g}.glb");
         let cluster_content = objects_glb(geom, &by_object, objects, &name)?.map(|glb| {
             files.push((name.clone(), glb));
             Content { uri: name }
         });
+        let mut group = GroupTiles {
+            group: g,
+            scene,
+            objects,
+            bounds: tile_box,
+            error,
+            cluster_content: cluster_content.clone(),
+            impostor_content: &impostor_content,
+            rests: Vec::new(),
+        };
+        let below = match switch {
+            Some(s) => vec![group.switch_tile(s, placement, &mut |name, rest| {
+                objects_glb(geom, &by_object, rest, name).map(|glb| {
+                    glb.map(|glb| {
+                        files.push((name.to_string(), glb));
+                    })
+                    .is_some()
+                })
+            })?],
+            None => Vec::new(),
+        };
         all = all.union(reach);
         child_boxes.push(tile_box);
         children.push(Tile {
             bounding_volume: tile_box.to_tiles(),
             viewer_request_volume: None,
-            // The farthest a viewer in any of its volumes is from it.
-            geometric_error: refining_error(job, reach.min.distance(reach.max)),
+            geometric_error: error,
             refine: Some(Refine::Replace),
             content: cluster_content,
-            children: impostor_tiles,
+            children: below,
             extras: Some(json!({ "impostors": impostors, "objects": objects })),
         });
     }
@@ -535,7 +500,7 @@ fn baked_layers(placement: &Placement, baked: &[u8], source: &str) -> Result<Vec
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::api::placement::SphereJson;
+    use crate::api::placement::{PlacedImpostor, SphereJson, ViewCellJson};
 
     fn imp(id: u32, objects: Vec<u32>, view_cell: ViewCellJson) -> PlacedImpostor {
         PlacedImpostor {
@@ -564,54 +529,15 @@ mod tests {
     }
 
     #[test]
-    fn shaft_request_boxes_hold_the_shaft_inside_the_view_space() {
-        let vs = Aabb {
-            min: DVec3::new(-50.0, -5.0, -40.0),
-            max: DVec3::new(60.0, 30.0, 45.0),
+    fn z_up_turns_y_into_z() {
+        let b = Aabb {
+            min: DVec3::new(1.0, 2.0, 3.0),
+            max: DVec3::new(4.0, 5.0, 6.0),
         };
-        let mut rng = crate::math::rng::Rng::new(9);
-        let mut inside = 0;
-        for k in 0..40 {
-            let a = DVec3::new(rng.f64() - 0.5, rng.f64() - 0.5, rng.f64() - 0.5).normalize();
-            let angle = [5.0, 20.0, 45.0, 80.0, 120.0][k % 5];
-            let i = imp(0, vec![0], shaft(a.to_array(), angle));
-            let b = request_box(&i, vs);
-            for _ in 0..400 {
-                let p = vs.min + (vs.max - vs.min) * DVec3::new(rng.f64(), rng.f64(), rng.f64());
-                let d = p - DVec3::new(1.0, 2.0, 3.0);
-                if d.length() >= 5.0 && d.angle_between(a).to_degrees() <= angle {
-                    inside += 1;
-                    let held = (0..3).all(|x| b.min[x] - 1e-9 <= p[x] && p[x] <= b.max[x] + 1e-9);
-                    assert!(held, "{p} outside {b:?} (axis {a}, {angle}°)");
-                }
-            }
-            // Clipped to the view space.
-            assert!((0..3).all(|x| b.min[x] >= vs.min[x] && b.max[x] <= vs.max[x]));
-        }
-        assert!(inside > 1000, "the shafts met only {inside} sample points");
-        // A narrow shaft along +x gets a box narrower than the view space.
-        let b = request_box(&imp(0, vec![0], shaft([1.0, 0.0, 0.0], 5.0)), vs);
-        assert!(b.max.y - b.min.y < 0.5 * (vs.max.y - vs.min.y), "{b:?}");
-        assert!(b.min.x >= 1.0, "{b:?}");
-    }
-
-    #[test]
-    fn box_cells_are_their_own_request_box_and_z_up_turns_y_into_z() {
-        let cell = ViewCellJson::Box {
-            min: [1.0, 2.0, 3.0],
-            max: [4.0, 5.0, 6.0],
-        };
-        let vs = Aabb {
-            min: DVec3::ZERO,
-            max: DVec3::splat(2.0),
-        };
-        let b = request_box(&imp(0, vec![0], cell), vs);
-        assert_eq!(
-            (b.min, b.max),
-            (DVec3::new(1.0, 2.0, 3.0), DVec3::new(4.0, 5.0, 6.0))
-        );
         assert_eq!(z_up(DVec3::new(1.0, 2.0, 3.0)), DVec3::new(1.0, -3.0, 2.0));
-        let BoundingVolume::Box(t) = b.to_tiles();
+        let BoundingVolume::Box(t) = b.to_tiles() else {
+            panic!("a box")
+        };
         // Centre (2.5, 3.5, 4.5) y-up is (2.5, −4.5, 3.5) z-up; half sizes
         // (1.5, 1.5, 1.5).
         assert_eq!(

@@ -148,6 +148,12 @@ window.tilesClient = {
     camera.aspect = w / h;
     camera.updateProjectionMatrix();
     tiles = new TilesRenderer(url);
+    // No cache limit: a tileset whose switch leaves name the same contents
+    // many times holds more tiles than the default cache (8,000 tiles,
+    // 0.4 GB), and the tests look at every tile at once.
+    const cache = tiles.lruCache;
+    cache.minSize = cache.maxSize = Infinity;
+    cache.minBytesSize = cache.maxBytesSize = Infinity;
     tiles.addEventListener("load-error", (e) => {
       errors.push({ url: e.url ?? null, message: String(e.error?.message ?? e.error) });
     });
