@@ -222,6 +222,9 @@ fn groups(p: &Placement) -> Vec<usize> {
     (0..parent.len()).map(|i| find(&mut parent, i)).collect()
 }
 
+/// A camera position and a point it looks at, y-up.
+type View = ([f64; 3], [f64; 3]);
+
 /// A view in `cpv` seeing what its impostors stand for: its region's
 /// centre, looking along a direction of its VDI whose component across is
 /// its interval's middle and whose component up or down is the one of its
@@ -229,7 +232,7 @@ fn groups(p: &Placement) -> Vec<usize> {
 /// VDI's centre a CPV of views pitched down sees only the ground near the
 /// viewer: its impostors were chosen for the views of the VDI that see the
 /// city. `None` for a CPV of views up or down (a face of the y axis).
-fn view_in(cpv: &PlacedCpv) -> Option<([f64; 3], [f64; 3])> {
+fn view_in(cpv: &PlacedCpv) -> Option<View> {
     let r = &cpv.region;
     let p: [f64; 3] = std::array::from_fn(|a| (r.min[a] + r.max[a]) / 2.0);
     let dirs = &cpv.directions;
@@ -783,7 +786,7 @@ fn cesium_switches_the_small_citys_impostors_by_the_viewers_position() {
     assert_eq!(loaded["loaded"], true, "{loaded}");
 
     // Views in CPVs with impostors, spread over the placement's CPVs.
-    let views: Vec<(&PlacedCpv, ([f64; 3], [f64; 3]))> = placement
+    let views: Vec<(&PlacedCpv, View)> = placement
         .cpvs
         .iter()
         .filter(|c| !c.impostors.is_empty())

@@ -536,23 +536,6 @@ fn the_page_submits_a_job_follows_it_and_views_its_impostors() {
         }
     }
 
-    // "Walk the path" follows the job's walkthrough to its end.
-    b.eval("document.getElementById('walk').click(); true");
-    assert_eq!(
-        b.eval("document.getElementById('viewer').dataset.walking"),
-        "true"
-    );
-    b.wait_for(
-        "document.getElementById('viewer').dataset.walking === 'false'",
-        Duration::from_secs(120),
-        "the walk reaching the path's end",
-    );
-    let end = b.eval("impostorViewer.state().position");
-    for (a, want) in path[3].iter().enumerate() {
-        let got = end[a].as_f64().unwrap();
-        assert!((got - want).abs() < 1e-6, "walk ended at {end}");
-    }
-
     // A walk of 100 frames along the path: at every frame the CPV shown is
     // the placement's CPV of the camera's view (found here from the
     // placement alone), with its impostors and only those drawn; the canvas
@@ -605,6 +588,23 @@ fn the_page_submits_a_job_follows_it_and_views_its_impostors() {
         seen.len() >= 3,
         "the walk met only CPVs {seen:?} with impostors"
     );
+    // "Walk the path" follows the job's walkthrough to its end.
+    b.eval("document.getElementById('walk').click(); true");
+    assert_eq!(
+        b.eval("document.getElementById('viewer').dataset.walking"),
+        "true"
+    );
+    b.wait_for(
+        "document.getElementById('viewer').dataset.walking === 'false'",
+        Duration::from_secs(300),
+        "the walk reaching the path's end",
+    );
+    let end = b.eval("impostorViewer.state().position");
+    for (a, want) in path[3].iter().enumerate() {
+        let got = end[a].as_f64().unwrap();
+        assert!((got - want).abs() < 1e-6, "walk ended at {end}");
+    }
+
     // The job list shows the job.
     b.navigate(&format!("http://{addr}/#/"));
     let row = b.wait_for(

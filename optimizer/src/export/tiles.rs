@@ -519,15 +519,6 @@ mod tests {
         }
     }
 
-    fn shaft(axis: [f64; 3], half_angle_deg: f64) -> ViewCellJson {
-        ViewCellJson::Shaft {
-            apex: [1.0, 2.0, 3.0],
-            axis,
-            half_angle_deg,
-            min_distance: 5.0,
-        }
-    }
-
     #[test]
     fn z_up_turns_y_into_z() {
         let b = Aabb {
