@@ -398,7 +398,7 @@ pub fn export(scene: &Scene, geom: &SceneGeometry, input: &TilesInput<'_>) -> Re
             extras: None,
         },
     };
-    let mut json = serde_json::to_vec_pretty(&tileset)
+    let mut json = serde_json::to_vec(&tileset)
         .map_err(|e| Error::Internal(format!("tileset JSON: {e}")))?;
     json.push(b'\n');
     files[0] = ("tileset.json".into(), json);
