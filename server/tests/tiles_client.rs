@@ -200,6 +200,38 @@ fn export(glb: &[u8], job: &Job) -> (Placement, Vec<(String, Vec<u8>)>) {
     (placement, files)
 }
 
+/// The small city's job, placement and tileset (written to `tiles_dir`).
+struct SmallCity {
+    glb: Vec<u8>,
+    job: Job,
+    placement: Placement,
+    files: Vec<(String, Vec<u8>)>,
+    tileset: Value,
+    tiles_dir: PathBuf,
+}
+
+/// Places, bakes and exports the small city's job into `dir/tiles`.
+fn small_city(dir: &Path) -> SmallCity {
+    let glb = common::city(0.1);
+    let job_json = common::process::small_job();
+    let job = Job::from_json(job_json.to_string().as_bytes(), "job").unwrap();
+    let (placement, files) = export(&glb, &job);
+    let tiles_dir = dir.join("tiles");
+    std::fs::create_dir_all(&tiles_dir).unwrap();
+    for (name, bytes) in &files {
+        std::fs::write(tiles_dir.join(name), bytes).unwrap();
+    }
+    let tileset: Value = serde_json::from_slice(&files[0].1).unwrap();
+    SmallCity {
+        glb,
+        job,
+        placement,
+        files,
+        tileset,
+        tiles_dir,
+    }
+}
+
 /// The cluster groups of a placement, counted independently of the export:
 /// the connected components of "two impostors share an object"; per
 /// impostor its component's representative.
@@ -358,16 +390,14 @@ fn the_small_citys_tileset_loads_and_refines_in_3d_tiles_renderer() {
     let dir = fresh("city");
     let client = dir.join("client");
     build_client("tiles-client", "3d-tiles-renderer", &client);
-    let glb = common::city(0.1);
-    let job_json = common::process::small_job();
-    let job = Job::from_json(job_json.to_string().as_bytes(), "job").unwrap();
-    let (placement, files) = export(&glb, &job);
-    let tiles_dir = dir.join("tiles");
-    std::fs::create_dir_all(&tiles_dir).unwrap();
-    for (name, bytes) in &files {
-        std::fs::write(tiles_dir.join(name), bytes).unwrap();
-    }
-    let tileset: Value = serde_json::from_slice(&files[0].1).unwrap();
+    let SmallCity {
+        job,
+        placement,
+        files,
+        tileset,
+        tiles_dir,
+        ..
+    } = small_city(&dir);
     let n = placement.impostors.len();
     assert!(n > 0, "the small city has impostors");
     let group_of = groups(&placement);
@@ -760,16 +790,14 @@ fn cesium_switches_the_small_citys_impostors_by_the_viewers_position() {
     let dir = fresh("cesium");
     let client = dir.join("client");
     build_client("cesium-client", "@cesium/engine", &client);
-    let glb = common::city(0.1);
-    let job_json = common::process::small_job();
-    let job = Job::from_json(job_json.to_string().as_bytes(), "job").unwrap();
-    let (placement, files) = export(&glb, &job);
-    let tiles_dir = dir.join("tiles");
-    std::fs::create_dir_all(&tiles_dir).unwrap();
-    for (name, bytes) in &files {
-        std::fs::write(tiles_dir.join(name), bytes).unwrap();
-    }
-    let tileset: Value = serde_json::from_slice(&files[0].1).unwrap();
+    let SmallCity {
+        glb,
+        job,
+        placement,
+        tileset,
+        tiles_dir,
+        ..
+    } = small_city(&dir);
     let scene = optimizer::scene::gltf_load::load_scene_bytes(&glb, "city").unwrap();
     let objects_of = content_objects(&tileset["root"], &placement, scene.objects.len());
     let addr = serve(client, tiles_dir);

@@ -398,8 +398,8 @@ pub fn export(scene: &Scene, geom: &SceneGeometry, input: &TilesInput<'_>) -> Re
             extras: None,
         },
     };
-    let mut json = serde_json::to_vec(&tileset)
-        .map_err(|e| Error::Internal(format!("tileset JSON: {e}")))?;
+    let mut json =
+        serde_json::to_vec(&tileset).map_err(|e| Error::Internal(format!("tileset JSON: {e}")))?;
     json.push(b'\n');
     files[0] = ("tileset.json".into(), json);
     Ok(files)
