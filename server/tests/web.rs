@@ -542,6 +542,7 @@ fn the_page_submits_a_job_follows_it_and_views_its_impostors() {
     // is drawn at frames along the way.
     let vs_max = [474.0, 2.0, 316.0];
     let mut seen = std::collections::BTreeSet::new();
+    let mut first_cpv = Value::Null;
     for i in 0..100 {
         let state = b.eval(&format!("impostorViewer.walkFrame({i}, 100)"));
         let xyz = |k: &str| [0, 1, 2].map(|a| state[k][a].as_f64().unwrap());
@@ -569,6 +570,9 @@ fn the_page_submits_a_job_follows_it_and_views_its_impostors() {
             active.len().to_string(),
             "frame {i}"
         );
+        if i == 0 {
+            first_cpv = state["cpv"].clone();
+        }
         if !active.is_empty() {
             seen.insert(id);
         }
@@ -604,6 +608,48 @@ fn the_page_submits_a_job_follows_it_and_views_its_impostors() {
         let got = end[a].as_f64().unwrap();
         assert!((got - want).abs() < 1e-6, "walk ended at {end}");
     }
+
+    // With a display budget below the scene's triangles the viewer draws
+    // the scene simplified, says so, and still switches impostors.
+    let scene_triangles: u64 = b
+        .eval("impostorViewer.state().sceneTriangles")
+        .as_str()
+        .unwrap()
+        .parse()
+        .unwrap();
+    assert_eq!(
+        b.eval("impostorViewer.state().drawnTriangles"),
+        scene_triangles.to_string(),
+        "under the default budget the scene is drawn as uploaded"
+    );
+    assert_eq!(b.eval("!!document.getElementById('decimated')"), false);
+    let budget = scene_triangles / 4;
+    // (The old viewer renamed, so the wait below cannot see it before the
+    // hash change reaches the page's router.)
+    b.eval("document.getElementById('viewer').id = 'old-viewer'; true");
+    b.navigate(&format!("http://{addr}/#/jobs/{id}/view?triangles={budget}"));
+    b.wait_for(
+        "(() => { const v = document.getElementById('viewer'); \
+                  return v && v.dataset.ready === 'true' && v.dataset.drawnTriangles; })()",
+        Duration::from_secs(120),
+        "the decimated viewer",
+    );
+    let state = b.eval("impostorViewer.walkFrame(0, 100)");
+    let drawn: u64 = state["drawnTriangles"].as_str().unwrap().parse().unwrap();
+    assert_eq!(state["sceneTriangles"], scene_triangles.to_string());
+    assert!(
+        drawn * 2 < scene_triangles,
+        "{drawn} of {scene_triangles} triangles drawn under a budget of {budget}"
+    );
+    assert_eq!(b.eval("!!document.getElementById('decimated')"), true);
+    assert_eq!(state["cpv"], first_cpv, "the first frame's CPV, decimated");
+    let pixels = b.eval("impostorViewer.pixels()");
+    let total = pixels["width"].as_u64().unwrap() * pixels["height"].as_u64().unwrap();
+    assert!(
+        pixels["drawn"].as_u64().unwrap() * 20 > total,
+        "the decimated scene is not drawn: {pixels}"
+    );
+    eprintln!("decimated for display: {scene_triangles} -> {drawn} triangles (budget {budget})");
 
     // The job list shows the job.
     b.navigate(&format!("http://{addr}/#/"));

@@ -1,4 +1,5 @@
-// The page's router: #/ (jobs), #/submit, #/jobs/ID, #/jobs/ID/view.
+// The page's router: #/ (jobs), #/submit, #/jobs/ID, #/jobs/ID/view
+// (?triangles=N: the display budget for the scene's triangles, 0 for none).
 import "./style.css";
 import { setToken, token } from "./api.js";
 import { jobPage } from "./job.js";
@@ -16,7 +17,9 @@ function route() {
   const hash = location.hash.replace(/^#/, "") || "/";
   let m;
   if (hash === "/submit") submitPage(main);
-  else if ((m = hash.match(/^\/jobs\/([\w-]+)\/view$/))) viewerPage(main, m[1], current.signal);
+  else if ((m = hash.match(/^\/jobs\/([\w-]+)\/view(?:\?triangles=(\d+))?$/))) {
+    viewerPage(main, m[1], current.signal, m[2] === undefined ? undefined : Number(m[2]));
+  }
   else if ((m = hash.match(/^\/jobs\/([\w-]+)$/))) jobPage(main, m[1], current.signal);
   else jobsPage(main);
 }

@@ -14,6 +14,7 @@
 import * as THREE from "three";
 import { GLTFLoader } from "three/examples/jsm/loaders/GLTFLoader.js";
 import { KTX2Loader } from "three/examples/jsm/loaders/KTX2Loader.js";
+import { DISPLAY_TRIANGLES, decimate } from "./decimate.js";
 import { bytes, json } from "./api.js";
 import { FrameChart } from "./chart.js";
 import { findCpv } from "./cpv.js";
@@ -21,8 +22,6 @@ import { errorBox, h } from "./dom.js";
 import { glbJson, objectNodes } from "./objects.js";
 import { regionLines, viewCell, boxLines } from "./overlays.js";
 
-/// Scenes over this many triangles get a note: the browser may be slow.
-const LARGE_TRIANGLES = 5_000_000;
 /// Meshes on this layer are not drawn (the camera sees layer 0 only);
 /// layers are not inherited, so hiding a node's meshes leaves its children.
 const HIDDEN = 1;
@@ -30,7 +29,9 @@ const HIDDEN = 1;
 /// atlases (`KHR_texture_basisu`).
 const TRANSCODER = BASIS_PATH;
 
-export async function viewerPage(main, id, signal) {
+/// The viewer of job `id`; scenes over `triangles` triangles (default
+/// DISPLAY_TRIANGLES; 0: never) are drawn decimated.
+export async function viewerPage(main, id, signal, triangles = DISPLAY_TRIANGLES) {
   const root = h("section", { id: "viewer", class: "viewer-page" });
   main.append(h("h1", {}, "Viewer of job ", h("a", { href: `#/jobs/${id}` }, h("code", {}, id))), root);
   const status = h("p", {}, "Loading the scene, the impostors and the placement…");
@@ -50,6 +51,8 @@ export async function viewerPage(main, id, signal) {
   status.remove();
   const viewer = new Viewer(root, renderer, data, signal);
   window.impostorViewer = viewer;
+  await viewer.fitForDisplay(triangles);
+  if (signal.aborted) return;
   root.dataset.ready = "true";
 }
 
@@ -140,10 +143,6 @@ class Viewer {
     this.cpv = undefined;
     this.plain = false;
     this.bindInput(signal);
-    if (this.triangles > LARGE_TRIANGLES) {
-      root.prepend(h("p", { class: "note" }, `The scene has ${this.triangles.toLocaleString()} triangles: ` +
-        "the browser may draw it slowly (the placement does not depend on it)."));
-    }
     this.last = performance.now();
     const frame = (t) => {
       if (signal.aborted) { this.renderer.dispose(); return; }
@@ -168,14 +167,26 @@ class Viewer {
     };
     this.objectMeshes = objects.map((n) => own(nodeObjects[n]));
     // Coarser levels of detail are not drawn: objects show their own level.
-    for (const n of levels) nodeObjects[n].visible = false;
-    this.triangles = 0;
-    gltf.scene.traverse((o) => {
-      if (o.isMesh && o.geometry) {
-        const g = o.geometry;
-        this.triangles += (g.index ? g.index.count : g.attributes.position.count) / 3;
-      }
-    });
+    this.hiddenLevels = new Set([...levels].map((n) => nodeObjects[n]));
+    for (const o of this.hiddenLevels) o.visible = false;
+    this.sceneRoot = gltf.scene;
+  }
+
+  /// Decimates the scene for display when it has more than `budget`
+  /// triangles (`decimate.js`), says so on the page and in `state()`
+  /// (`sceneTriangles`, `drawnTriangles`).
+  async fitForDisplay(budget) {
+    const { before, after } = await decimate(this.sceneRoot, budget, this.hiddenLevels);
+    this.root.dataset.sceneTriangles = String(before);
+    this.root.dataset.drawnTriangles = String(after);
+    if (after < before) {
+      this.root.prepend(h("p", { class: "note", id: "decimated" },
+        `The scene has ${before.toLocaleString()} triangles: drawn simplified to ${after.toLocaleString()} ` +
+        "for display (the placement and the impostors were made from the scene as uploaded)."));
+    } else if (budget > 0 && before > budget) {
+      this.root.prepend(h("p", { class: "note" }, `The scene has ${before.toLocaleString()} triangles ` +
+        "and could not be simplified: the browser may draw it slowly."));
+    }
   }
 
   /// The nodes of each impostor id: `extras.impostor` of the baked GLB,
