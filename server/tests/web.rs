@@ -627,7 +627,9 @@ fn the_page_submits_a_job_follows_it_and_views_its_impostors() {
     // (The old viewer renamed, so the wait below cannot see it before the
     // hash change reaches the page's router.)
     b.eval("document.getElementById('viewer').id = 'old-viewer'; true");
-    b.navigate(&format!("http://{addr}/#/jobs/{id}/view?triangles={budget}"));
+    b.navigate(&format!(
+        "http://{addr}/#/jobs/{id}/view?triangles={budget}"
+    ));
     b.wait_for(
         "(() => { const v = document.getElementById('viewer'); \
                   return v && v.dataset.ready === 'true' && v.dataset.drawnTriangles; })()",
