@@ -2,7 +2,7 @@
 """Frame rate of the web page's 3D viewer in headless Chromium (SwiftShader,
 software WebGL), on a baked job of a running impostor-server:
 
-    tools/viewer-fps.py http://127.0.0.1:PORT JOB_ID [FRAMES]
+    tools/viewer-fps.py http://127.0.0.1:PORT JOB_ID [FRAMES [TRIANGLES]]
 
 Opens the job's viewer through tools/chromium-cdp.py and measures, on a
 960 x 600 canvas:
@@ -23,6 +23,9 @@ if len(sys.argv) < 3:
     sys.exit(2)
 base, job = sys.argv[1].rstrip("/"), sys.argv[2]
 frames = int(sys.argv[3]) if len(sys.argv) > 3 else 100
+# The viewer's display budget (#/jobs/ID/view?triangles=N; 0: the scene as
+# uploaded); the viewer's default when not given.
+budget = "?triangles=%d" % int(sys.argv[4]) if len(sys.argv) > 4 else ""
 bridge = subprocess.Popen(
     [sys.executable, os.path.join(os.path.dirname(os.path.abspath(__file__)), "chromium-cdp.py")],
     stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
@@ -43,7 +46,7 @@ def js(expr, timeout=600):
     return r["result"].get("value")
 
 assert json.loads(bridge.stdout.readline())["result"]["ready"]
-send("Page.navigate", {"url": "%s/#/jobs/%s/view" % (base, job)})
+send("Page.navigate", {"url": "%s/#/jobs/%s/view%s" % (base, job, budget)})
 js(r"""new Promise((ok, no) => { const t = setInterval(() => {
   const v = document.getElementById('viewer');
   if (v && v.dataset.error) { clearInterval(t); no(new Error(v.dataset.error)); }
@@ -79,10 +82,12 @@ WALK = """new Promise((ok) => { const v = impostorViewer; v.setPlain(%s);
     else { if (v.walk) v.toggleWalk(); ok({ fps: n / ((performance.now() - t0) / 1000) }); } };
   requestAnimationFrame(count); })"""
 out = {"frames": frames, "canvas": [960, 600],
-       "triangles": js("impostorViewer.triangles"),
+       "triangles": js("Number(impostorViewer.root.dataset.sceneTriangles)"),
+       "drawn_triangles": js("Number(impostorViewer.root.dataset.drawnTriangles)"),
        "objects": js("impostorViewer.objectMeshes.length"),
        "impostors": js("impostorViewer.impostorNodes.size")}
-print("viewer-fps: the viewer is open (%d objects, %d triangles)" % (out["objects"], out["triangles"]),
+print("viewer-fps: the viewer is open (%d objects, %d triangles, %d drawn)"
+      % (out["objects"], out["triangles"], out["drawn_triangles"]),
       file=sys.stderr)
 for name, plain in (("with_impostors", "false"), ("without_impostors", "true")):
     out[name] = js(DRAW % (frames, plain), timeout=3600)

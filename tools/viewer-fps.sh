@@ -5,9 +5,9 @@
 # waits for it and runs tools/viewer-fps.py on it.
 #
 #   cargo build --release -p server
-#   tools/viewer-fps.sh SCENE.glb JOB.json [FRAMES]
+#   tools/viewer-fps.sh SCENE.glb JOB.json [FRAMES [TRIANGLES]]
 set -euo pipefail
-[ $# -ge 2 ] || { echo "usage: tools/viewer-fps.sh SCENE.glb JOB.json [FRAMES]" >&2; exit 2; }
+[ $# -ge 2 ] || { echo "usage: tools/viewer-fps.sh SCENE.glb JOB.json [FRAMES [TRIANGLES]]" >&2; exit 2; }
 here=$(cd "$(dirname "$0")" && pwd)
 server="$here/../target/release/impostor-server"
 [ -x "$server" ] || { echo "viewer-fps: build the server first (cargo build --release -p server)" >&2; exit 2; }
@@ -29,4 +29,4 @@ while :; do
   esac
   sleep 1
 done
-python3 "$here/viewer-fps.py" "$base" "$id" "${3:-100}"
+python3 "$here/viewer-fps.py" "$base" "$id" "${3:-100}" ${4:+"$4"}
