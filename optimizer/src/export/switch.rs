@@ -61,35 +61,49 @@ impl Switch {
 /// The switch of the group of `impostors` (ids ascending) of `placement`
 /// over the box of the CPV regions that draw any of them; `None` when no
 /// CPV draws one (the group is then drawn as geometry everywhere).
+#[cfg(test)]
 pub(super) fn group_switch(placement: &Placement, impostors: &[u32]) -> Option<Switch> {
-    // The regions drawing some of the group's impostors, each once, with
-    // the group's impostors drawn in any of its CPVs.
-    let mut regions: Vec<(Aabb, Vec<u32>)> = Vec::new();
-    for cpv in &placement.cpvs {
-        let mine: Vec<u32> = cpv
-            .impostors
-            .iter()
-            .copied()
-            .filter(|i| impostors.binary_search(i).is_ok())
-            .collect();
-        if mine.is_empty() {
-            continue;
+    group_switches(placement, &[impostors]).pop().flatten()
+}
+
+/// [`group_switch`] of every group of `groups` (disjoint sets of impostor
+/// ids, each ascending), the placement's CPVs read once.
+pub(super) fn group_switches(placement: &Placement, groups: &[&[u32]]) -> Vec<Option<Switch>> {
+    let mut group_of: Vec<Option<usize>> = vec![None; placement.impostors.len()];
+    for (g, ids) in groups.iter().enumerate() {
+        for &i in *ids {
+            if let Some(slot) = group_of.get_mut(i as usize) {
+                *slot = Some(g);
+            }
         }
+    }
+    // Per group, the regions drawing some of its impostors, each once, with
+    // the group's impostors drawn in any of its CPVs.
+    let mut regions: Vec<Vec<(Aabb, Vec<u32>)>> = vec![Vec::new(); groups.len()];
+    for cpv in &placement.cpvs {
         let b = Aabb {
             min: DVec3::from_array(cpv.region.min),
             max: DVec3::from_array(cpv.region.max),
         };
-        match regions.iter_mut().find(|(r, _)| *r == b) {
-            Some((_, ids)) => ids.extend(mine),
-            None => regions.push((b, mine)),
+        for &i in &cpv.impostors {
+            let Some(g) = group_of.get(i as usize).copied().flatten() else {
+                continue;
+            };
+            match regions[g].iter_mut().find(|(r, _)| *r == b) {
+                Some((_, ids)) => ids.push(i),
+                None => regions[g].push((b, vec![i])),
+            }
         }
     }
-    if regions.is_empty() {
-        return None;
-    }
-    let bounds = regions.iter().fold(regions[0].0, |u, (r, _)| u.union(*r));
-    let all: Vec<usize> = (0..regions.len()).collect();
-    Some(cut(placement, &regions, bounds, &all))
+    regions
+        .into_iter()
+        .map(|regions| {
+            let first = regions.first()?.0;
+            let bounds = regions.iter().fold(first, |u, (r, _)| u.union(*r));
+            let all: Vec<usize> = (0..regions.len()).collect();
+            Some(cut(placement, &regions, bounds, &all))
+        })
+        .collect()
 }
 
 /// The switch over `bounds` of the regions `live` (those meeting it).

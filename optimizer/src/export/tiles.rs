@@ -60,7 +60,7 @@ use serde::{Deserialize, Serialize};
 use serde_json::{Value, json};
 
 use super::content::{instances_by_object, objects_glb};
-use super::switch::{GroupTiles, Switch, group_switch};
+use super::switch::{GroupTiles, Switch, group_switches};
 use crate::api::job::Job;
 use crate::api::placement::{Placement, Summary};
 use crate::bake::{BakeOptions, Layer, read_layers, write_glb};
@@ -269,10 +269,8 @@ pub fn export(scene: &Scene, geom: &SceneGeometry, input: &TilesInput<'_>) -> Re
         atlas_size: 0,
         ..BakeOptions::default()
     };
-    let switches: Vec<Option<Switch>> = groups
-        .iter()
-        .map(|(_, impostors)| group_switch(placement, impostors))
-        .collect();
+    let group_ids: Vec<&[u32]> = groups.iter().map(|(_, ids)| ids.as_slice()).collect();
+    let switches: Vec<Option<Switch>> = group_switches(placement, &group_ids);
     let mut drawn = vec![false; placement.impostors.len()];
     for s in switches.iter().flatten() {
         for (_, ids) in s.leaves() {
