@@ -44,9 +44,14 @@ pub struct Stats {
     pub cpv_precision_sampled: u64,
     /// (CPV, cluster) pairs examined by candidate generation.
     pub candidate_pairs: u64,
-    /// Of those, the pairs that store their own cost (their cluster is
-    /// partly outside the CPV's enclosing set); the others take the
-    /// cluster's whole cost in the cell, held once per group.
+    /// Of those, the pairs held one by one (their cluster is partly
+    /// outside the CPV's enclosing set); the others lie below a node of the
+    /// hierarchy's cut through the set and are held as a bit per CPV in
+    /// their group.
+    #[serde(default)]
+    pub explicit_pairs: u64,
+    /// Of the explicit pairs, those that store their own cost; the others
+    /// take the cluster's whole cost in the cell, held once per group.
     #[serde(default)]
     pub stored_pair_costs: u64,
     /// Groups: one cluster's pairs in one cell.

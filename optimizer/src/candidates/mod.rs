@@ -93,7 +93,7 @@ impl Candidates {
 /// counted whether or not its impostor would help there, so the estimate
 /// leans high.
 pub fn estimate_served(ctx: &Context, job: &Job, pv: &ProblemViews) -> u64 {
-    let [_, _, groups] = crate::views::PairCounts::totals(&pv.node_counts);
+    let groups = crate::views::PairCounts::totals(&pv.node_counts).cells;
     if groups == 0 {
         return 0;
     }

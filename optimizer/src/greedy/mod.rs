@@ -362,11 +362,11 @@ impl<'a> State<'a> {
             }
             // All CPVs of a group share their region, hence the impostor's cost.
             let imp = self.ctx.model.impostor(cand.spec.layers, s.radius, gr.dist);
-            for (c, orig) in all.pairs.iter(gr) {
+            all.pairs.for_each(gr, |c, orig| {
                 if let Some(e) = self.effect(c, cand.node, orig, imp) {
                     f(c, e);
                 }
-            }
+            });
         }
     }
 
@@ -389,12 +389,12 @@ impl<'a> State<'a> {
                 continue;
             }
             let imp = self.ctx.model.impostor(layers, s.radius, gr.dist);
-            for (c, orig) in all.pairs.iter(gr) {
+            all.pairs.for_each(gr, |c, orig| {
                 let excess = self.excess[c as usize];
                 if excess > 0.0 {
                     *sum += self.gain(c, node, orig, imp, excess);
                 }
-            }
+            });
         }
     }
 
@@ -456,18 +456,18 @@ impl<'a> State<'a> {
                     .iter()
                     .map(|&l| self.ctx.model.impostor_covering(layers[l], px)),
             );
-            for (c, orig) in self.all.pairs.iter(gr) {
+            self.all.pairs.for_each(gr, |c, orig| {
                 let excess = self.excess[c as usize];
                 if excess <= 0.0 {
-                    continue;
+                    return;
                 }
                 let Some(rep) = self.representation(c, node, orig) else {
-                    continue;
+                    return;
                 };
                 for (&l, &imp) in active.iter().zip(&imps) {
                     sums[l] += self.gain_over(c, rep, imp, excess);
                 }
-            }
+            });
         });
         self.per_byte(block, sums, 1.0)
     }
@@ -509,7 +509,7 @@ impl<'a> State<'a> {
                 }
                 return;
             };
-            let n = f64::from(gr.pairs.len().min(n));
+            let n = f64::from(gr.len.min(n));
             let px = m.pixels(r, gr.dist);
             for &l in active {
                 let imp = m

@@ -638,7 +638,7 @@ pub fn select(
         .list
         .iter()
         .flat_map(|c| &cands.served[c.served.indices()])
-        .map(|&g| u64::from(cands.pairs.group(g).pairs.len()))
+        .map(|&g| u64::from(cands.pairs.group(g).len))
         .sum();
     let cap = job.exact.max_variables;
     if listed > cap.saturating_mul(EARLY_REFUSAL) {

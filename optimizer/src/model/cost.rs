@@ -143,6 +143,18 @@ impl CostModel {
         }
     }
 
+    /// True when replacing objects that cost `orig` by something costing
+    /// `imp` can lower some frame time: where times add up, when it costs
+    /// less in total; in `max` mode, when it costs less on either side
+    /// (which side decides depends on the rest of the frame). It depends
+    /// on the two costs alone, not on the frame they are part of.
+    pub fn may_accelerate(&self, orig: Cost, imp: Cost) -> bool {
+        match self.combine {
+            Combine::Sum | Combine::Primitives => imp.cpu + imp.gpu < orig.cpu + orig.gpu,
+            Combine::Max => imp.cpu < orig.cpu || imp.gpu < orig.gpu,
+        }
+    }
+
     /// Projected pixels of a sphere of `radius` seen from `distance`.
     pub fn pixels(&self, radius: f64, distance: f64) -> f64 {
         projected_area_px(radius, distance, self.focal_px, self.screen_px)

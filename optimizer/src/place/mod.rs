@@ -235,6 +235,7 @@ impl Prepared<'_> {
 
         let stats = Stats {
             candidate_pairs: cands.pairs.len(),
+            explicit_pairs: cands.pairs.explicit_len(),
             stored_pair_costs: cands.pairs.stored_len(),
             pair_groups: cands.pairs.groups_len(),
             served_entries: cands.served.len() as u64,
@@ -283,9 +284,13 @@ impl Prepared<'_> {
     }
 }
 
-/// Bytes a run holds per (CPV, cluster) pair from candidate generation on:
-/// its CPV id.
+/// Bytes a run holds per explicit (CPV, cluster) pair from candidate
+/// generation on: its CPV id (the pairs below cut nodes take none).
 pub const BYTES_PER_PAIR: u64 = 4;
+
+/// Bytes per 64-bit word of a group's set of CPVs that list its cluster
+/// below a cut node.
+pub const BYTES_PER_BIT_WORD: u64 = 8;
 
 /// Bytes the greedy adds per pair: the savings of descendant impostors per
 /// (ancestor, CPV) it adjusts (16 bytes each) and the CPVs' impostor lists.
@@ -298,9 +303,9 @@ pub const GREEDY_BYTES_PER_PAIR: u64 = 8;
 pub const BYTES_PER_STORED: u64 = 16;
 
 /// Bytes a run holds per group (one cluster's pairs in one cell), besides
-/// its served-list entries: the group itself (40 bytes) and the allocator's
+/// its served-list entries: the group itself (48 bytes) and the allocator's
 /// slack.
-pub const BYTES_PER_GROUP: u64 = 48;
+pub const BYTES_PER_GROUP: u64 = 56;
 
 /// Bytes per entry of the candidates' served lists: the group id (4
 /// bytes) and its share of the candidates (about 130 bytes each; 1–13
@@ -313,12 +318,14 @@ pub const BYTES_PER_SERVED: u64 = 12;
 /// per-CPV greedy state (costs, lists and the CPV itself, about 256 bytes)
 /// and the greedy's marks per (CPV, hierarchy node).
 pub fn predicted_peak_bytes(ctx: &Context, job: &Job, pv: &ProblemViews) -> u64 {
-    let [pairs, stored, groups] = PairCounts::totals(&pv.node_counts);
+    let t = PairCounts::totals(&pv.node_counts);
     let served = candidates::estimate_served(ctx, job, pv);
     current_rss_bytes()
-        + pairs * (BYTES_PER_PAIR + GREEDY_BYTES_PER_PAIR)
-        + stored * BYTES_PER_STORED
-        + groups * BYTES_PER_GROUP
+        + t.explicit * BYTES_PER_PAIR
+        + t.pairs * GREEDY_BYTES_PER_PAIR
+        + t.bit_words * BYTES_PER_BIT_WORD
+        + t.partial * BYTES_PER_STORED
+        + t.cells * BYTES_PER_GROUP
         + served * BYTES_PER_SERVED
         + pv.cpvs.len() as u64 * 256
         + greedy::marks_bytes(pv.cpvs.len(), pv.node_counts.len())
@@ -509,7 +516,7 @@ mod tests {
         let job = synthetic_job(5, 5);
         let out = try_place(&scene, &job, &PlaceOptions::default(), &Control::default()).unwrap();
         let predicted = out.stats.predicted_peak_bytes;
-        assert!(predicted > out.stats.candidate_pairs * BYTES_PER_PAIR);
+        assert!(predicted > out.stats.candidate_pairs * GREEDY_BYTES_PER_PAIR);
         let opts = PlaceOptions {
             max_memory_bytes: Some(predicted / 2),
             ..PlaceOptions::default()

@@ -6,7 +6,7 @@ use crate::math::enclosing::enclosing_cone;
 use crate::math::geom::{Aabb, Vdi};
 use crate::math::grid::Grid;
 use crate::views::context::{Context, Counters};
-use crate::views::costs::{RegionCosts, cpv_clusters, exceeds_target};
+use crate::views::costs::{CpvCut, Listable, RegionCosts, cpv_cut, exceeds_target};
 use crate::views::{Cpv, KdNode, PairCounts, ProblemViews, leaf_level};
 
 /// Builds the kd tree over the grid (pre-order).
@@ -375,6 +375,46 @@ struct Levels {
     split: u8,
 }
 
+/// Per cluster, what the lists `cuts` of one cell's CPVs hold of it
+/// ([`PairCounts`]): a cluster below a cut node of a CPV is listed there
+/// when [`Listable::ok`].
+fn cell_pair_counts(
+    ctx: &Context,
+    costs: &RegionCosts,
+    listable: &Listable,
+    cuts: &[CpvCut],
+) -> Vec<PairCounts> {
+    let h = ctx.hierarchy;
+    let mut counts = vec![PairCounts::default(); h.nodes.len()];
+    let mut cut_here = vec![0u32; h.nodes.len()];
+    for cut in cuts {
+        for &(m, c) in &cut.explicit {
+            let e = &mut counts[m as usize];
+            e.pairs += 1;
+            e.explicit += 1;
+            e.partial += u32::from(c != costs.nodes[m as usize]);
+        }
+        for &a in &cut.cuts {
+            cut_here[a as usize] += 1;
+        }
+    }
+    let words = cuts.len().div_ceil(64) as u32;
+    // Per node: the CPVs with a cut node on its path from the root (a
+    // parent's id is below its children's).
+    let mut above = vec![0u32; h.nodes.len()];
+    for m in 0..h.nodes.len() {
+        let p = h.nodes[m].parent;
+        above[m] = cut_here[m] + if p == u32::MAX { 0 } else { above[p as usize] };
+        let e = &mut counts[m];
+        if listable.ok[m] && above[m] > 0 {
+            e.pairs += above[m];
+            e.bit_words += words;
+        }
+        e.cells = u32::from(e.pairs > 0);
+    }
+    counts
+}
+
 fn process(
     ctx: &Context,
     counters: &Counters,
@@ -435,25 +475,22 @@ fn process(
             // Each CPV keeps only how many clusters it lists; the lists are
             // counted per cluster here and computed again, a cell at a
             // time, by candidate generation.
-            let mut node_counts = vec![PairCounts::default(); ctx.hierarchy.nodes.len()];
+            let listable = Listable::new(ctx, &costs, &region);
+            let cuts: Vec<CpvCut> = problems
+                .iter()
+                .map(|vdi| cpv_cut(ctx, &costs, &listable, &region, vdi))
+                .collect();
+            let node_counts = cell_pair_counts(ctx, &costs, &listable, &cuts);
             let cpvs = problems
                 .into_iter()
-                .map(|vdi| {
-                    let (cost, nodes) = cpv_clusters(ctx, &costs, &region, &vdi);
-                    for &(n, c) in &nodes {
-                        let e = &mut node_counts[n as usize];
-                        e.pairs += 1;
-                        e.partial += u32::from(c != costs.nodes[n as usize]);
-                        e.cells = 1;
-                    }
-                    Cpv {
-                        kd: id,
-                        region,
-                        vdi,
-                        cost,
-                        time: ctx.model.frame_time(cost),
-                        listed: nodes.len() as u32,
-                    }
+                .zip(cuts)
+                .map(|(vdi, cut)| Cpv {
+                    kd: id,
+                    region,
+                    vdi,
+                    cost: cut.cost,
+                    time: ctx.model.frame_time(cut.cost),
+                    listed: cut.listed(&listable),
                 })
                 .collect::<Vec<Cpv>>();
             let pairs: u64 = cpvs.iter().map(|c| u64::from(c.listed)).sum();

@@ -88,15 +88,88 @@ fn leaf_cost(ctx: &Context, costs: &RegionCosts, cone: &Enclosing, n: u32, mask:
     c
 }
 
+/// Which clusters a CPV of one region may list where its enclosing set
+/// holds them whole: those with something to draw from the region, whose
+/// sphere does not meet the region (an impostor is drawn outside its view
+/// cell) and whose objects a one-layer impostor could accelerate
+/// ([`Listable::may_list`]). Every CPV of a cell shares its region, so the
+/// cell computes this once; a cluster the set holds only in part is judged
+/// the same way with its cost in the set.
+pub struct Listable {
+    /// Per node: listed wherever the set holds it whole.
+    pub ok: Vec<bool>,
+    /// Per node: how many nodes of its subtree are `ok`.
+    pub below: Vec<u32>,
+}
+
+impl Listable {
+    /// The clusters CPVs of `region` may list, with the region's `costs`.
+    pub fn new(ctx: &Context, costs: &RegionCosts, region: &Aabb) -> Listable {
+        let h = ctx.hierarchy;
+        let ok: Vec<bool> = (0..h.nodes.len() as u32)
+            .map(|n| Self::may_list(ctx, region, n, costs.nodes[n as usize]))
+            .collect();
+        let mut below: Vec<u32> = ok.iter().map(|&o| u32::from(o)).collect();
+        for n in (1..h.nodes.len()).rev() {
+            let p = h.nodes[n].parent as usize;
+            below[p] += below[n];
+        }
+        Listable { ok, below }
+    }
+
+    /// True when a CPV of `region` lists cluster `n` whose objects in its
+    /// enclosing set cost `cost`: they cost something, the cluster's
+    /// sphere does not meet the region, and a one-layer impostor of it
+    /// may accelerate a frame that draws them
+    /// ([`CostModel::may_accelerate`](crate::model::cost::CostModel::may_accelerate)).
+    pub fn may_list(ctx: &Context, region: &Aabb, n: u32, cost: Cost) -> bool {
+        let s = ctx.hierarchy.nodes[n as usize].sphere;
+        (cost.cpu > 0.0 || cost.gpu > 0.0)
+            && !region.intersects_sphere(s.center, s.radius)
+            && ctx.model.may_accelerate(
+                cost,
+                ctx.model
+                    .impostor(1, s.radius, region.distance_to_point(s.center)),
+            )
+    }
+}
+
+/// What a CPV lists, as the hierarchy's cut through its enclosing set:
+/// every cluster below a node of `cuts` that is [`Listable::ok`] is listed
+/// with its whole cost in the cell; the clusters the set holds in part are
+/// listed in `explicit` with their cost in the set.
+#[derive(Clone, Debug, Default)]
+pub struct CpvCut {
+    /// The cost of what the enclosing set sees.
+    pub cost: Cost,
+    /// Clusters the set holds in part (their sphere is not inside it), with
+    /// the cost of their objects inside it, by node id.
+    pub explicit: Vec<(u32, Cost)>,
+    /// The nodes whose sphere lies inside the set, whose parent's does not
+    /// and below which some cluster is `ok`, by node id.
+    pub cuts: Vec<u32>,
+}
+
+impl CpvCut {
+    /// How many clusters it lists.
+    pub fn listed(&self, listable: &Listable) -> u32 {
+        self.explicit.len() as u32
+            + self
+                .cuts
+                .iter()
+                .map(|&a| listable.below[a as usize])
+                .sum::<u32>()
+    }
+}
+
 /// Cost of all objects whose bounding sphere meets `cone`. When `emit` is
-/// given, also lists every cluster meeting the cone whose sphere does not meet
-/// `region`, with the cost of its objects inside the cone.
+/// given, also records what a CPV of `region` lists ([`CpvCut`]).
 pub fn enclosed_cost(
     ctx: &Context,
     costs: &RegionCosts,
     cone: &Enclosing,
     region: &Aabb,
-    mut emit: Option<&mut Vec<(u32, Cost)>>,
+    mut emit: Option<(&Listable, &mut CpvCut)>,
 ) -> Cost {
     fn visit(
         ctx: &Context,
@@ -104,7 +177,7 @@ pub fn enclosed_cost(
         cone: &Enclosing,
         region: &Aabb,
         (n, mask): (u32, Bounds),
-        emit: &mut Option<&mut Vec<(u32, Cost)>>,
+        emit: &mut Option<(&Listable, &mut CpvCut)>,
     ) -> Cost {
         let h = ctx.hierarchy;
         // A cluster with nothing to draw from the region (culled by
@@ -118,18 +191,11 @@ pub fn enclosed_cost(
         if overlap == Overlap::Outside {
             return Cost::default();
         }
-        let replaceable = |m: u32| {
-            let s = h.nodes[m as usize].sphere;
-            !region.intersects_sphere(s.center, s.radius)
-        };
         if overlap == Overlap::Inside {
-            if let Some(out) = emit.as_deref_mut() {
-                for m in n..node.subtree_end {
-                    let c = costs.nodes[m as usize];
-                    if (c.cpu > 0.0 || c.gpu > 0.0) && replaceable(m) {
-                        out.push((m, costs.nodes[m as usize]));
-                    }
-                }
+            if let Some((listable, out)) = emit.as_mut()
+                && listable.below[n as usize] > 0
+            {
+                out.cuts.push(n);
             }
             return costs.nodes[n as usize];
         }
@@ -140,15 +206,20 @@ pub fn enclosed_cost(
                     + visit(ctx, costs, cone, region, (r, left), emit)
             }
         };
-        if let Some(out) = emit.as_deref_mut()
-            && (c.cpu > 0.0 || c.gpu > 0.0)
-            && replaceable(n)
+        if let Some((_, out)) = emit.as_mut()
+            && Listable::may_list(ctx, region, n, c)
         {
-            out.push((n, c));
+            out.explicit.push((n, c));
         }
         c
     }
-    visit(ctx, costs, cone, region, (0, cone.all_bounds()), &mut emit)
+    let cost = visit(ctx, costs, cone, region, (0, cone.all_bounds()), &mut emit);
+    if let Some((_, out)) = emit {
+        out.cost = cost;
+        out.explicit.sort_unstable_by_key(|&(n, _)| n);
+        out.cuts.sort_unstable();
+    }
+    cost
 }
 
 /// True when the objects whose spheres meet `cone` cost more than the
@@ -196,35 +267,46 @@ pub fn exceeds_target(ctx: &Context, costs: &RegionCosts, cone: &Enclosing) -> b
     false
 }
 
+/// What a CPV of (`region`, `vdi`) lists ([`CpvCut`]), `listable` being
+/// its region's. The problem view approximation counts these lists;
+/// candidate generation computes them again, one cell at a time, instead
+/// of holding every CPV's list at once.
+pub fn cpv_cut(
+    ctx: &Context,
+    costs: &RegionCosts,
+    listable: &Listable,
+    region: &Aabb,
+    vdi: &Vdi,
+) -> CpvCut {
+    let cone = enclosing_cone(region, vdi, &ctx.lens);
+    let mut out = CpvCut::default();
+    enclosed_cost(ctx, costs, &cone, region, Some((listable, &mut out)));
+    out
+}
+
 /// The cost of what the enclosing frustum of (`region`, `vdi`) sees, and
-/// the clusters a CPV there may replace, sorted by node id, each with the
-/// cost of its objects inside the frustum: they meet the frustum, do not
-/// meet the region, and a one-layer impostor of them would be cheaper than
-/// their objects there. The problem view approximation counts these lists;
-/// candidate generation computes them again, one cell at a time, instead of
-/// holding every CPV's list at once.
+/// every cluster a CPV there lists, by node id, each with the cost of its
+/// objects inside the frustum: [`cpv_cut`] with the clusters below its cut
+/// spelled out.
 pub fn cpv_clusters(
     ctx: &Context,
     costs: &RegionCosts,
     region: &Aabb,
     vdi: &Vdi,
 ) -> (Cost, Vec<(u32, Cost)>) {
-    let cone = enclosing_cone(region, vdi, &ctx.lens);
-    let mut nodes = Vec::new();
-    let cost = enclosed_cost(ctx, costs, &cone, region, Some(&mut nodes));
-    let t = ctx.model.frame_time(cost);
+    let listable = Listable::new(ctx, costs, region);
+    let cut = cpv_cut(ctx, costs, &listable, region, vdi);
     let h = ctx.hierarchy;
-    // Keep the clusters some impostor could accelerate: an impostor has at
-    // least one layer.
-    nodes.retain(|&(n, orig)| {
-        let s = h.nodes[n as usize].sphere;
-        let imp = ctx
-            .model
-            .impostor(1, s.radius, region.distance_to_point(s.center));
-        ctx.model.frame_time(cost - orig + imp) < t
-    });
+    let mut nodes = cut.explicit;
+    for &a in &cut.cuts {
+        nodes.extend(
+            (a..h.nodes[a as usize].subtree_end)
+                .filter(|&m| listable.ok[m as usize])
+                .map(|m| (m, costs.nodes[m as usize])),
+        );
+    }
     nodes.sort_unstable_by_key(|&(n, _)| n);
-    (cost, nodes)
+    (cut.cost, nodes)
 }
 
 /// Estimated frame time of views in `region` with directions in `vdi`, using

@@ -21,7 +21,10 @@ mod precision;
 
 pub use approximate::approximate;
 pub use context::{Context, Counters};
-pub use costs::{RegionCosts, cpv_clusters, enclosed_cost, enclosing_time, exceeds_target};
+pub use costs::{
+    CpvCut, Listable, RegionCosts, cpv_clusters, cpv_cut, enclosed_cost, enclosing_time,
+    exceeds_target,
+};
 pub use precision::{cpv_precision, exact_view_time, slowest_sampled_view, slowest_view_search};
 
 use crate::math::geom::{Aabb, Vdi};
@@ -63,41 +66,68 @@ pub struct Cpv {
     /// How many clusters may become impostors here: they meet the enclosing
     /// frustum, do not meet the region, and a one-layer impostor of them
     /// would be cheaper than their objects in the frustum
-    /// ([`cpv_clusters`] lists them).
+    /// ([`cpv_clusters`] lists them, [`cpv_cut`] as the hierarchy's cut).
     pub listed: u32,
 }
 
-/// How often one cluster is listed by CPVs (see [`Cpv::listed`]).
+/// How often one cluster is listed by CPVs (see [`Cpv::listed`]), and what
+/// the pairs hold of it ([`crate::candidates::Pairs`]).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct PairCounts {
     /// CPVs that list the cluster: its (CPV, cluster) pairs.
     pub pairs: u32,
-    /// Of those, the pairs whose cost differs from the cluster's whole cost
-    /// in the CPV's cell (the cluster is partly outside the enclosing set):
-    /// their costs are stored, the others derive from the cell's.
+    /// Of those, the pairs listed one by one: the enclosing set holds the
+    /// cluster in part ([`CpvCut::explicit`]); the others lie below a node
+    /// of the CPV's cut.
+    pub explicit: u32,
+    /// Of the explicit pairs, those whose cost differs from the cluster's
+    /// whole cost in the CPV's cell: their costs are stored, the others
+    /// derive from the cell's.
     pub partial: u32,
     /// Cells with a CPV listing the cluster (its groups).
     pub cells: u32,
+    /// 64-bit words of its groups' sets of CPVs that list it below a cut
+    /// node ([`CpvCut::cuts`]).
+    pub bit_words: u32,
 }
 
 impl std::ops::AddAssign for PairCounts {
     fn add_assign(&mut self, o: PairCounts) {
         self.pairs += o.pairs;
+        self.explicit += o.explicit;
         self.partial += o.partial;
         self.cells += o.cells;
+        self.bit_words += o.bit_words;
     }
 }
 
+/// The totals of [`PairCounts`] over every cluster, as 64-bit sums.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct PairTotals {
+    /// Pairs.
+    pub pairs: u64,
+    /// Explicit pairs.
+    pub explicit: u64,
+    /// Pairs whose cost is stored.
+    pub partial: u64,
+    /// Groups.
+    pub cells: u64,
+    /// Words of the groups' CPV sets below cut nodes.
+    pub bit_words: u64,
+}
+
 impl PairCounts {
-    /// The totals over every cluster of `counts`, as 64-bit sums.
-    pub fn totals(counts: &[PairCounts]) -> [u64; 3] {
-        counts.iter().fold([0u64; 3], |[p, q, c], n| {
-            [
-                p + u64::from(n.pairs),
-                q + u64::from(n.partial),
-                c + u64::from(n.cells),
-            ]
-        })
+    /// The totals over every cluster of `counts`.
+    pub fn totals(counts: &[PairCounts]) -> PairTotals {
+        counts
+            .iter()
+            .fold(PairTotals::default(), |t, n| PairTotals {
+                pairs: t.pairs + u64::from(n.pairs),
+                explicit: t.explicit + u64::from(n.explicit),
+                partial: t.partial + u64::from(n.partial),
+                cells: t.cells + u64::from(n.cells),
+                bit_words: t.bit_words + u64::from(n.bit_words),
+            })
     }
 }
 
