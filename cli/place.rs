@@ -33,7 +33,8 @@ pub struct PlaceArgs {
     #[arg(long)]
     method: Option<MethodArg>,
     /// Refuse the job when its predicted peak memory exceeds this many GB
-    /// (default: the machine's memory).
+    /// (default: the memory available: what the machine has free, plus what
+    /// the process holds).
     #[arg(long, value_name = "GB", value_parser = parse_gb)]
     max_memory_gb: Option<u64>,
 }

@@ -74,7 +74,8 @@ struct JobLimits {
     job_max_seconds: Option<u64>,
     /// The most memory a job's placement may be predicted to need, GB: a
     /// job predicted to need more ends `failed` before allocating it
-    /// (default: the machine's memory).
+    /// (default: the memory available: what the machine has free, plus what
+    /// the process holds).
     #[arg(long, value_name = "GB", value_parser = parse_gb)]
     job_max_memory: Option<u64>,
 }

@@ -258,7 +258,8 @@ impl Pairs {
         let counts = &pv.node_counts;
         let t = PairCounts::totals(counts);
         assert!(
-            t.explicit < u64::from(u32::MAX) && (pv.cpvs.len() as u64) < u64::from(STORED),
+            t.explicit.max(t.bit_words).max(t.cells) < u64::from(u32::MAX)
+                && (pv.cpvs.len() as u64) < u64::from(STORED),
             "the memory check caps the pairs below 2^32"
         );
         // Per cluster: where its next explicit pair, stored cost, group and

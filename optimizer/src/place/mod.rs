@@ -24,7 +24,7 @@ pub struct PlaceOptions {
     /// Run the pruning pass after the greedy selection.
     pub prune: bool,
     /// The most memory a run may need, bytes, as predicted once the problem
-    /// views are known; `None`: the machine's memory ([`machine_memory_bytes`]).
+    /// views are known; `None`: the memory available ([`machine_memory_bytes`]).
     pub max_memory_bytes: Option<u64>,
     /// Who set `max_memory_bytes`, named when a job is refused for it (a
     /// command-line flag, a server's per-job limit).
@@ -98,7 +98,10 @@ impl Prepared<'_> {
         ctl.check()?;
         let predicted = predicted_peak_bytes(&ctx, job, &pv);
         let limit = opts.max_memory_bytes.unwrap_or_else(machine_memory_bytes);
-        if predicted > limit || counters.pairs() >= u64::from(u32::MAX) {
+        // The pairs' arrays are indexed by 32-bit ids.
+        let t = PairCounts::totals(&pv.node_counts);
+        let held = t.explicit.max(t.bit_words).max(t.cells);
+        if predicted > limit || held >= u64::from(u32::MAX) {
             return Err(Error::bad(
                 self.job_name(),
                 format!(
@@ -331,9 +334,15 @@ pub fn predicted_peak_bytes(ctx: &Context, job: &Job, pv: &ProblemViews) -> u64 
         + greedy::marks_bytes(pv.cpvs.len(), pv.node_counts.len())
 }
 
-/// The machine's memory, bytes (`MemTotal`; `u64::MAX` when unknown).
+/// The memory this run may grow into, bytes: what the machine has
+/// available now (`MemAvailable`, which other processes' use lowers) and
+/// what this process already holds, never more than the machine's
+/// (`MemTotal`); `u64::MAX` when unknown.
 pub fn machine_memory_bytes() -> u64 {
-    meminfo_kb("/proc/meminfo", "MemTotal:").map_or(u64::MAX, |kb| kb * 1024)
+    let total = meminfo_kb("/proc/meminfo", "MemTotal:").map_or(u64::MAX, |kb| kb * 1024);
+    meminfo_kb("/proc/meminfo", "MemAvailable:").map_or(total, |kb| {
+        (kb * 1024).saturating_add(current_rss_bytes()).min(total)
+    })
 }
 
 /// Resident set size of this process now (VmRSS), bytes; 0 when unknown.
@@ -508,6 +517,17 @@ mod tests {
         };
         let r = try_place(&scene, &job, &PlaceOptions::default(), &ctl);
         assert!(matches!(r, Err(Error::Cancelled)));
+    }
+
+    /// The default limit is the memory available to this run: at least
+    /// what it holds, at most the machine's, and below the machine's by
+    /// what other processes hold (here, at least the kernel's own).
+    #[test]
+    fn the_memory_limit_is_what_is_available() {
+        let total = meminfo_kb("/proc/meminfo", "MemTotal:").expect("MemTotal") * 1024;
+        let limit = machine_memory_bytes();
+        assert!(limit >= current_rss_bytes(), "{limit}");
+        assert!(limit < total, "{limit} of {total}");
     }
 
     #[test]
