@@ -43,7 +43,7 @@ use lazy::blocks;
 pub(crate) use lazy::select_lazy_with;
 pub use lazy::{LAZY_BATCH, select_lazy};
 pub use marks::marks_bytes;
-use marks::{Mark, NodeMarks, cell_word_mask};
+use marks::{Adjustments, Mark, NodeMarks, cell_word_mask};
 
 /// The selection: which candidates are impostors and where they are used.
 #[derive(Clone, Debug)]
@@ -130,7 +130,7 @@ struct State<'a> {
     all: &'a Candidates,
     /// Per cluster: for the CPVs where it is adjusted, in CPV order, what
     /// the impostors placed below it there save against its objects.
-    adjustments: Vec<Vec<Cost>>,
+    adjustments: Vec<Adjustments>,
     /// Per (CPV, cluster): covered when an impostor of the cluster or an
     /// ancestor is placed there (a subtree is a range of pre-order ids),
     /// adjusted when one of a descendant is, so its representation is its
@@ -189,7 +189,7 @@ impl<'a> State<'a> {
             pv,
             cands: &cands.list,
             all: cands,
-            adjustments: vec![Vec::new(); ctx.hierarchy.nodes.len()],
+            adjustments: vec![Adjustments::default(); ctx.hierarchy.nodes.len()],
             marks: NodeMarks::new(pv.cpvs.len(), ctx.hierarchy.nodes.len()),
             unsolved_in_cell: {
                 let mut v = vec![0u32; pv.kd.len()];
@@ -303,7 +303,7 @@ impl<'a> State<'a> {
         match self.marks.get(c, node) {
             Mark::Covered => None,
             Mark::Plain => Some(orig),
-            Mark::Adjusted(rank) => Some(orig - self.adjustments[node as usize][rank]),
+            Mark::Adjusted(rank) => Some(orig - self.adjustments[node as usize].get(rank)),
         }
     }
 
@@ -692,7 +692,7 @@ mod tests {
         use std::collections::BTreeMap;
         let (cpvs, nodes) = (300usize, 9usize);
         let mut marks = NodeMarks::new(cpvs, nodes);
-        let mut adjustments = vec![Vec::new(); nodes];
+        let mut adjustments = vec![Adjustments::default(); nodes];
         let mut want: BTreeMap<(u32, u32), f64> = BTreeMap::new();
         let mut covered = std::collections::BTreeSet::new();
         let mut rng = crate::math::rng::Rng::new(5);
@@ -720,6 +720,12 @@ mod tests {
                 covered.insert((c, n));
             }
         }
+        // Values no CPV refers to any more were dropped along the way:
+        // never more than twice the CPVs held and the changes of one call.
+        for a in &adjustments {
+            let (held, values) = a.sizes();
+            assert!(values <= 2 * held + 64 + 40, "{values} values for {held}");
+        }
         for c in 0..cpvs as u32 {
             for n in 0..nodes as u32 {
                 match marks.get(c, n) {
@@ -727,7 +733,7 @@ mod tests {
                     Mark::Plain => assert!(!want.contains_key(&(c, n))),
                     Mark::Adjusted(rank) => {
                         assert!(!covered.contains(&(c, n)));
-                        assert_eq!(adjustments[n as usize][rank].cpu, want[&(c, n)]);
+                        assert_eq!(adjustments[n as usize].get(rank).cpu, want[&(c, n)]);
                     }
                 }
             }
