@@ -97,7 +97,7 @@ impl Iterator for PairIter<'_> {
             if lo >= self.cell.end {
                 return None;
             }
-            let (m, e, _) = p.word(self.group, lo, self.word, self.next);
+            let (m, e) = p.word(self.group, lo, self.word, self.next);
             self.mask = m;
             self.explicit = e;
             self.base = lo;
@@ -191,7 +191,7 @@ impl Pairs {
         let mut next = g.explicit.start as usize;
         for w in 0..cell.len().div_ceil(64) {
             let lo = cell.start + 64 * w;
-            let (mut m, e, _) = self.word(g, lo, w, next);
+            let (mut m, e) = self.word(g, lo, w, next);
             while m != 0 {
                 let b = m.trailing_zeros();
                 m &= m - 1;
@@ -209,10 +209,9 @@ impl Pairs {
     }
 
     /// The CPVs of group `g` in word `w` of its cell (whose first CPV is
-    /// `lo`), those of them with explicit pairs (from `next` on), and the
-    /// explicit pair after them.
+    /// `lo`), and those of them with explicit pairs (from `next` on).
     #[inline]
-    fn word(&self, g: &Group, lo: u32, w: u32, next: usize) -> (u64, u64, usize) {
+    fn word(&self, g: &Group, lo: u32, w: u32, next: usize) -> (u64, u64) {
         let m = if g.bits == NONE {
             0
         } else {
@@ -225,7 +224,7 @@ impl Pairs {
             e |= 1 << ((self.explicit[j] & !STORED) - lo);
             j += 1;
         }
-        (m | e, e, j)
+        (m | e, e)
     }
 
     /// The cost of cluster `node`'s objects in CPV `cpv`'s enclosing set,
