@@ -18,11 +18,13 @@ use rayon::prelude::*;
 
 use crate::math::IdRange;
 use crate::model::cost::Cost;
-use crate::views::{Context, CpvCut, Listable, PairCounts, ProblemViews, RegionCosts, cpv_cut};
+use crate::views::{
+    CellCuts, Context, CpvCut, Listable, PairCounts, ProblemViews, RegionCosts, cpv_cut,
+};
 
 /// Set in an explicit pair's CPV id when its cost is stored.
 const STORED: u32 = 1 << 31;
-/// No cut node, no CPV set.
+/// No CPV set (a group none of whose CPVs lists it below a cut node).
 const NONE: u32 = u32::MAX;
 
 /// One cell's CPVs that list one cluster.
@@ -384,7 +386,6 @@ struct CellPairs {
 impl CellPairs {
     /// The cuts of the CPVs `r` (one cell's) and the groups they make.
     fn of(ctx: &Context, pv: &ProblemViews, r: IdRange) -> CellPairs {
-        let h = ctx.hierarchy;
         let first = &pv.cpvs[r.start as usize];
         let costs = RegionCosts::of_kd(
             ctx,
@@ -392,12 +393,10 @@ impl CellPairs {
             &crate::views::Counters::new(),
         );
         let listable = Listable::new(ctx, &costs, &first.region);
-        let words = r.len().div_ceil(64) as usize;
         let mut explicit: Vec<(u32, u32, Option<Cost>)> = Vec::new();
-        // (cut node, the cell's CPV index).
-        let mut at_cuts: Vec<(u32, u32)> = Vec::new();
+        let mut cuts: Vec<CpvCut> = Vec::with_capacity(r.len() as usize);
         for (i, c) in pv.cpvs[r.indices()].iter().enumerate() {
-            let cut: CpvCut = cpv_cut(ctx, &costs, &listable, &c.region, &c.vdi);
+            let cut = cpv_cut(ctx, &costs, &listable, &c.region, &c.vdi);
             debug_assert_eq!((cut.cost, cut.listed(&listable)), (c.cost, c.listed));
             let ci = r.start + i as u32;
             explicit.extend(
@@ -405,77 +404,18 @@ impl CellPairs {
                     .iter()
                     .map(|&(n, cost)| (n, ci, (cost != costs.nodes[n as usize]).then_some(cost))),
             );
-            at_cuts.extend(cut.cuts.iter().map(|&a| (a, i as u32)));
+            cuts.push(cut);
         }
         // Stable: each cluster's pairs stay in CPV order.
         explicit.sort_by_key(|e| e.0);
-        at_cuts.sort_unstable();
-        // The cut nodes, each with its CPV set and the cut node above it.
-        let mut cuts: Vec<(u32, u32)> = Vec::new();
-        let mut cut_nodes: Vec<u32> = Vec::new();
-        let mut bits: Vec<u64> = Vec::new();
-        let mut stack: Vec<u32> = Vec::new();
-        for &(a, i) in &at_cuts {
-            if cut_nodes.last() != Some(&a) {
-                while let Some(&top) = stack.last() {
-                    if h.is_descendant(a, cut_nodes[top as usize]) {
-                        break;
-                    }
-                    stack.pop();
-                }
-                let k = cut_nodes.len() as u32;
-                cuts.push((stack.last().copied().unwrap_or(NONE), bits.len() as u32));
-                cut_nodes.push(a);
-                bits.extend(std::iter::repeat_n(0, words));
-                stack.push(k);
-            }
-            let k = cuts.len() - 1;
-            bits[cuts[k].1 as usize + i as usize / 64] |= 1 << (i % 64);
-        }
-        // Per node below a cut node: the nearest cut node above it (or
-        // itself) and the CPVs with a cut node above it (pre-order: a
-        // parent comes before its children).
-        let mut nearest = vec![NONE; h.nodes.len()];
-        let mut below = vec![0u32; h.nodes.len()];
-        let mut implied: Vec<u32> = Vec::new();
-        let mut end = 0u32;
-        let mut next_cut = 0usize;
-        for &a in &cut_nodes {
-            if a < end {
-                continue;
-            }
-            end = h.nodes[a as usize].subtree_end;
-            for m in a..end {
-                let p = h.nodes[m as usize].parent;
-                let (mut near, mut n) = if p == NONE || m == a {
-                    (NONE, 0)
-                } else {
-                    (nearest[p as usize], below[p as usize])
-                };
-                if cut_nodes.get(next_cut) == Some(&m) {
-                    let (_, b) = cuts[next_cut];
-                    n += bits[b as usize..][..words]
-                        .iter()
-                        .map(|w| w.count_ones())
-                        .sum::<u32>();
-                    near = next_cut as u32;
-                    next_cut += 1;
-                }
-                nearest[m as usize] = near;
-                below[m as usize] = n;
-                if listable.ok[m as usize] && n > 0 {
-                    implied.push(m);
-                }
-            }
-        }
-        debug_assert_eq!(next_cut, cut_nodes.len());
+        let below = CellCuts::new(ctx, &listable, &cuts);
         // The groups: clusters listed explicitly or below a cut node.
         let mut groups: Vec<CellGroup> = Vec::new();
-        let mut out_bits: Vec<u64> = Vec::new();
+        let mut bits: Vec<u64> = Vec::new();
         let (mut e, mut k) = (0usize, 0usize);
         loop {
             let en = explicit.get(e).map(|x| x.0);
-            let kn = implied.get(k).copied();
+            let kn = below.listed.get(k).copied();
             let node = match (en, kn) {
                 (None, None) => break,
                 (Some(a), Some(b)) => a.min(b),
@@ -487,23 +427,12 @@ impl CellPairs {
                 n += 1;
                 e += 1;
             }
+            let mut group_bits = None;
             if kn == Some(node) {
                 k += 1;
-            }
-            let ok = listable.ok[node as usize];
-            let mut group_bits = None;
-            if ok && below[node as usize] > 0 {
-                group_bits = Some(out_bits.len() as u32);
-                out_bits.extend(std::iter::repeat_n(0, words));
-                let mut k = nearest[node as usize];
-                while k != NONE {
-                    let (up, b) = cuts[k as usize];
-                    for w in 0..words {
-                        out_bits[group_bits.unwrap_or(0) as usize + w] |= bits[b as usize + w];
-                    }
-                    k = up;
-                }
-                n += below[node as usize];
+                group_bits = Some(bits.len() as u32);
+                bits.extend_from_slice(below.above(node));
+                n += below.count(node);
             }
             groups.push(CellGroup {
                 node,
@@ -514,7 +443,7 @@ impl CellPairs {
         }
         CellPairs {
             cell: r,
-            bits: out_bits,
+            bits,
             groups,
             explicit,
         }

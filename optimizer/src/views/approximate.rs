@@ -6,7 +6,7 @@ use crate::math::enclosing::enclosing_cone;
 use crate::math::geom::{Aabb, Vdi};
 use crate::math::grid::Grid;
 use crate::views::context::{Context, Counters};
-use crate::views::costs::{CpvCut, Listable, RegionCosts, cpv_cut, exceeds_target};
+use crate::views::costs::{CellCuts, CpvCut, Listable, RegionCosts, cpv_cut, exceeds_target};
 use crate::views::{Cpv, KdNode, PairCounts, ProblemViews, leaf_level};
 
 /// Builds the kd tree over the grid (pre-order).
@@ -384,33 +384,22 @@ fn cell_pair_counts(
     listable: &Listable,
     cuts: &[CpvCut],
 ) -> Vec<PairCounts> {
-    let h = ctx.hierarchy;
-    let mut counts = vec![PairCounts::default(); h.nodes.len()];
-    let mut cut_here = vec![0u32; h.nodes.len()];
+    let mut counts = vec![PairCounts::default(); ctx.hierarchy.nodes.len()];
     for cut in cuts {
         for &(m, c) in &cut.explicit {
             let e = &mut counts[m as usize];
             e.pairs += 1;
             e.explicit += 1;
             e.partial += u32::from(c != costs.nodes[m as usize]);
-        }
-        for &a in &cut.cuts {
-            cut_here[a as usize] += 1;
+            e.cells = 1;
         }
     }
-    let words = cuts.len().div_ceil(64) as u32;
-    // Per node: the CPVs with a cut node on its path from the root (a
-    // parent's id is below its children's).
-    let mut above = vec![0u32; h.nodes.len()];
-    for m in 0..h.nodes.len() {
-        let p = h.nodes[m].parent;
-        above[m] = cut_here[m] + if p == u32::MAX { 0 } else { above[p as usize] };
-        let e = &mut counts[m];
-        if listable.ok[m] && above[m] > 0 {
-            e.pairs += above[m];
-            e.bit_words += words;
-        }
-        e.cells = u32::from(e.pairs > 0);
+    let below = CellCuts::new(ctx, listable, cuts);
+    for &m in &below.listed {
+        let e = &mut counts[m as usize];
+        e.pairs += below.count(m);
+        e.bit_words += below.words as u32;
+        e.cells = 1;
     }
     counts
 }

@@ -162,6 +162,74 @@ impl CpvCut {
     }
 }
 
+/// The cuts of one cell's CPVs, per cluster: the CPVs (bit `i`: the cell's
+/// `i`-th CPV) with a cut node at or above it, which list it whole where
+/// it is [`Listable::ok`]. The problem view approximation counts them and
+/// candidate generation keeps them with the groups.
+pub struct CellCuts {
+    /// 64-bit words per cluster.
+    pub words: usize,
+    /// Per node, `words` words; zero outside the cut nodes' subtrees.
+    above: Vec<u64>,
+    /// The `ok` clusters below cut nodes (some CPV lists them whole), by
+    /// node id.
+    pub listed: Vec<u32>,
+}
+
+impl CellCuts {
+    /// The cuts `cuts` of one cell's CPVs, in CPV order.
+    pub fn new(ctx: &Context, listable: &Listable, cuts: &[CpvCut]) -> CellCuts {
+        let h = ctx.hierarchy;
+        let words = cuts.len().div_ceil(64);
+        let mut above = vec![0u64; h.nodes.len() * words];
+        let mut at: Vec<(u32, usize)> = cuts
+            .iter()
+            .enumerate()
+            .flat_map(|(i, c)| c.cuts.iter().map(move |&a| (a, i)))
+            .collect();
+        at.sort_unstable();
+        for &(a, i) in &at {
+            above[a as usize * words + i / 64] |= 1 << (i % 64);
+        }
+        // Down each top cut node's subtree in pre-order (a parent before
+        // its children): a node's set holds its parent's.
+        let mut listed = Vec::new();
+        let mut end = 0u32;
+        for &(a, _) in &at {
+            if a < end {
+                continue;
+            }
+            end = h.nodes[a as usize].subtree_end;
+            for m in a..end {
+                if m > a {
+                    let p = h.nodes[m as usize].parent as usize;
+                    for w in 0..words {
+                        above[m as usize * words + w] |= above[p * words + w];
+                    }
+                }
+                if listable.ok[m as usize] {
+                    listed.push(m);
+                }
+            }
+        }
+        CellCuts {
+            words,
+            above,
+            listed,
+        }
+    }
+
+    /// The CPVs with a cut node at or above cluster `n`.
+    pub fn above(&self, n: u32) -> &[u64] {
+        &self.above[n as usize * self.words..][..self.words]
+    }
+
+    /// How many CPVs have a cut node at or above cluster `n`.
+    pub fn count(&self, n: u32) -> u32 {
+        self.above(n).iter().map(|w| w.count_ones()).sum()
+    }
+}
+
 /// Cost of all objects whose bounding sphere meets `cone`. When `emit` is
 /// given, also records what a CPV of `region` lists ([`CpvCut`]).
 pub fn enclosed_cost(

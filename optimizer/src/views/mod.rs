@@ -22,7 +22,7 @@ mod precision;
 pub use approximate::approximate;
 pub use context::{Context, Counters};
 pub use costs::{
-    CpvCut, Listable, RegionCosts, cpv_clusters, cpv_cut, enclosed_cost, enclosing_time,
+    CellCuts, CpvCut, Listable, RegionCosts, cpv_clusters, cpv_cut, enclosed_cost, enclosing_time,
     exceeds_target,
 };
 pub use precision::{cpv_precision, exact_view_time, slowest_sampled_view, slowest_view_search};
