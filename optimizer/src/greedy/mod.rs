@@ -696,7 +696,9 @@ mod tests {
         let mut want: BTreeMap<(u32, u32), f64> = BTreeMap::new();
         let mut covered = std::collections::BTreeSet::new();
         let mut rng = crate::math::rng::Rng::new(5);
-        for round in 0..200 {
+        // Enough rounds that without dropping values they would outnumber
+        // the bound below several times over.
+        for round in 0..2000 {
             let n = (rng.next_u64() % nodes as u64) as u32;
             let mut cs: Vec<u32> = (0..1 + rng.next_u64() % 40)
                 .map(|_| (rng.next_u64() % cpvs as u64) as u32)
