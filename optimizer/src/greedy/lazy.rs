@@ -164,8 +164,9 @@ pub(crate) fn select_lazy_with(
     let batch = LAZY_BATCH;
     let mut version = 0u64;
     let block_of = |e: &Entry| blocks[e.key.id as usize].start as usize;
-    // (block start, compute exact scores rather than bounds).
-    let mut stale: Vec<(u32, bool)> = Vec::with_capacity(batch);
+    // (block start, the key): a current key becomes exact scores, any
+    // other a current bound.
+    let mut stale: Vec<(u32, Entry)> = Vec::with_capacity(batch);
     while let Some(&top) = heap.peek() {
         if top.seq < latest[block_of(&top)] {
             heap.pop();
@@ -199,23 +200,26 @@ pub(crate) fn select_lazy_with(
                     heap.pop();
                 }
                 Some(e) if !(e.exact && current(e) && st.fits(e.key.id)) => {
-                    stale.push((block_of(e) as u32, current(e)));
+                    stale.push((block_of(e) as u32, *e));
                     heap.pop();
                 }
                 _ => break,
             }
         }
-        let fresh: Vec<Vec<f64>> = stale
+        // Whether a key is current is found in parallel too: it walks the
+        // cells the candidate serves.
+        let fresh: Vec<(bool, Vec<f64>)> = stale
             .par_iter()
-            .map(|&(b, exact)| {
-                if exact {
-                    st.score_block(blocks[b as usize])
+            .map(|(b, e)| {
+                let block = blocks[*b as usize];
+                if current(e) {
+                    (true, st.score_block(block))
                 } else {
-                    st.bound_block(blocks[b as usize])
+                    (false, st.bound_block(block))
                 }
             })
             .collect();
-        for (&(b, exact), scores) in stale.iter().zip(fresh) {
+        for (&(b, _), (exact, scores)) in stale.iter().zip(fresh) {
             if exact {
                 st.sel.evaluations += scores.len() as u64;
             } else {

@@ -136,61 +136,34 @@ impl NodeMarks {
         }
     }
 
-    /// Adds `saving` to cluster `n`'s adjustment in each CPV of `changes`
-    /// (ascending CPV ids), marking it adjusted where it was not: one pass
-    /// over the node's row and its `adjustments`.
-    pub(super) fn adjust(
+    /// Adds `saving` to the adjustment of each cluster of `nodes`
+    /// (ascending ids; their adjustments are `adjustments`, by node id) in
+    /// each CPV of `changes` (ascending CPV ids), marking it adjusted where
+    /// it was not: one pass over each node's row and adjustments, the
+    /// nodes in parallel (each has its own).
+    pub(super) fn adjust_all(
         &mut self,
-        n: u32,
+        nodes: &[u32],
         changes: &[(u32, Cost)],
-        adjustments: &mut Adjustments,
+        adjustments: &mut [Adjustments],
     ) {
-        let row = &mut self.bits[n as usize * self.row..][..self.row];
-        let rank = |row: &[u64], c: u32| {
-            let at = 3 * (c as usize / 64);
-            let below = row[at + 1] & ((1u64 << (c % 64)) - 1);
-            row[at + 2] as usize + below.count_ones() as usize
-        };
-        // Existing adjustments first, while the ranks are unchanged; the
-        // new ones with the rank they get among the old ones. Equal sums
-        // (the same saving added to the same value, as in the CPVs of a
-        // cell that held the cluster whole) share one value.
-        let mut made: Option<((u32, [u64; 2]), u32)> = None;
-        let mut new: Vec<(usize, u32)> = Vec::new();
-        for &(c, saving) in changes {
-            let k = rank(row, c);
-            let bits = [saving.cpu.to_bits(), saving.gpu.to_bits()];
-            if row[3 * (c as usize / 64) + 1] >> (c % 64) & 1 == 1 {
-                let old = adjustments.idx[k];
-                adjustments.idx[k] = adjustments.value_of(&mut made, old, bits, |v| v + saving);
-            } else {
-                new.push((
-                    k,
-                    adjustments.value_of(&mut made, NO_VALUE, bits, |_| saving),
-                ));
-            }
+        use rayon::prelude::*;
+        let mut work: Vec<(&mut [u64], &mut Adjustments)> = Vec::with_capacity(nodes.len());
+        let (mut bits, mut adj) = (&mut self.bits[..], adjustments);
+        let mut at = 0usize;
+        for &n in nodes {
+            let skip = n as usize - at;
+            let (row, rest) = std::mem::take(&mut bits)[skip * self.row..].split_at_mut(self.row);
+            let (a, rest_adj) = std::mem::take(&mut adj)[skip..]
+                .split_first_mut()
+                .expect("a node id within the hierarchy");
+            work.push((row, a));
+            bits = rest;
+            adj = rest_adj;
+            at = n as usize + 1;
         }
-        if !new.is_empty() {
-            for &(c, _) in changes {
-                row[3 * (c as usize / 64) + 1] |= 1 << (c % 64);
-            }
-            let idx = &adjustments.idx;
-            let mut merged = Vec::with_capacity(idx.len() + new.len());
-            let mut from = 0;
-            for (k, v) in new {
-                merged.extend_from_slice(&idx[from..k]);
-                merged.push(v);
-                from = k;
-            }
-            merged.extend_from_slice(&idx[from..]);
-            adjustments.idx = merged;
-            let mut before = 0u64;
-            for w in row.chunks_exact_mut(3) {
-                w[2] = before;
-                before += u64::from(w[1].count_ones());
-            }
-        }
-        adjustments.compact();
+        work.into_par_iter()
+            .for_each(|(row, a)| adjust_row(row, changes, a));
     }
 
     /// Marks `a..b` covered in CPV `c`.
@@ -200,6 +173,55 @@ impl NodeMarks {
             self.bits[n as usize * self.row + word] |= 1 << bit;
         }
     }
+}
+
+/// [`NodeMarks::adjust_all`] on one node's row.
+fn adjust_row(row: &mut [u64], changes: &[(u32, Cost)], adjustments: &mut Adjustments) {
+    let rank = |row: &[u64], c: u32| {
+        let at = 3 * (c as usize / 64);
+        let below = row[at + 1] & ((1u64 << (c % 64)) - 1);
+        row[at + 2] as usize + below.count_ones() as usize
+    };
+    // Existing adjustments first, while the ranks are unchanged; the
+    // new ones with the rank they get among the old ones. Equal sums
+    // (the same saving added to the same value, as in the CPVs of a
+    // cell that held the cluster whole) share one value.
+    let mut made: Option<((u32, [u64; 2]), u32)> = None;
+    let mut new: Vec<(usize, u32)> = Vec::new();
+    for &(c, saving) in changes {
+        let k = rank(row, c);
+        let bits = [saving.cpu.to_bits(), saving.gpu.to_bits()];
+        if row[3 * (c as usize / 64) + 1] >> (c % 64) & 1 == 1 {
+            let old = adjustments.idx[k];
+            adjustments.idx[k] = adjustments.value_of(&mut made, old, bits, |v| v + saving);
+        } else {
+            new.push((
+                k,
+                adjustments.value_of(&mut made, NO_VALUE, bits, |_| saving),
+            ));
+        }
+    }
+    if !new.is_empty() {
+        for &(c, _) in changes {
+            row[3 * (c as usize / 64) + 1] |= 1 << (c % 64);
+        }
+        let idx = &adjustments.idx;
+        let mut merged = Vec::with_capacity(idx.len() + new.len());
+        let mut from = 0;
+        for (k, v) in new {
+            merged.extend_from_slice(&idx[from..k]);
+            merged.push(v);
+            from = k;
+        }
+        merged.extend_from_slice(&idx[from..]);
+        adjustments.idx = merged;
+        let mut before = 0u64;
+        for w in row.chunks_exact_mut(3) {
+            w[2] = before;
+            before += u64::from(w[1].count_ones());
+        }
+    }
+    adjustments.compact();
 }
 
 /// The bits of word `w` of a CPV bitset that belong to the CPV range `r`.

@@ -27,6 +27,8 @@
 use std::cmp::Ordering;
 use std::ops::Range;
 
+use rayon::prelude::*;
+
 use crate::api::job::Job;
 use crate::api::placement::UnsolvedReason;
 use crate::candidates::{Candidate, Candidates, Group};
@@ -352,22 +354,28 @@ impl<'a> State<'a> {
     /// Calls `f(cpv, effect)` for every CPV candidate `i` may serve (only
     /// in cells with CPVs above `t_max` when `unsolved_cells_only`).
     fn for_each_effect(&self, i: u32, unsolved_cells_only: bool, mut f: impl FnMut(u32, Effect)) {
-        let all = self.all;
         let cand = &self.cands[i as usize];
-        let s = self.ctx.hierarchy.nodes[cand.node as usize].sphere;
-        for &g in &all.served[cand.served.indices()] {
-            let gr = all.pairs.group(g);
+        for &g in &self.all.served[cand.served.indices()] {
+            let gr = self.all.pairs.group(g);
             if unsolved_cells_only && self.unsolved_in_cell[gr.kd as usize] == 0 {
                 continue;
             }
-            // All CPVs of a group share their region, hence the impostor's cost.
-            let imp = self.ctx.model.impostor(cand.spec.layers, s.radius, gr.dist);
-            all.pairs.for_each(gr, |c, orig| {
-                if let Some(e) = self.effect(c, cand.node, orig, imp) {
-                    f(c, e);
-                }
-            });
+            self.group_effects(i, gr, &mut f);
         }
+    }
+
+    /// Calls `f(cpv, effect)` for every CPV of group `gr` candidate `i`
+    /// serves.
+    fn group_effects(&self, i: u32, gr: &Group, f: &mut impl FnMut(u32, Effect)) {
+        let cand = &self.cands[i as usize];
+        let s = self.ctx.hierarchy.nodes[cand.node as usize].sphere;
+        // All CPVs of a group share their region, hence the impostor's cost.
+        let imp = self.ctx.model.impostor(cand.spec.layers, s.radius, gr.dist);
+        self.all.pairs.for_each(gr, |c, orig| {
+            if let Some(e) = self.effect(c, cand.node, orig, imp) {
+                f(c, e);
+            }
+        });
     }
 
     fn score(&self, i: u32) -> f64 {
@@ -529,12 +537,22 @@ impl<'a> State<'a> {
             self.chosen[i as usize] = true;
             self.spent += self.cands[i as usize].spec.memory_bytes;
         }
-        let mut changes: Vec<(u32, Cost, Cost)> = Vec::new();
-        self.for_each_effect(i, false, |c, e| {
-            if e.accelerates {
-                changes.push((c, e.new_cost, e.saving));
-            }
-        });
+        // The effects, group by group in parallel (each CPV is in one
+        // group), then in CPV order.
+        let served = &self.all.served[self.cands[i as usize].served.indices()];
+        let mut changes: Vec<(u32, Cost, Cost)> = served
+            .par_iter()
+            .with_min_len(64)
+            .flat_map_iter(|&g| {
+                let mut out = Vec::new();
+                self.group_effects(i, self.all.pairs.group(g), &mut |c, e: Effect| {
+                    if e.accelerates {
+                        out.push((c, e.new_cost, e.saving));
+                    }
+                });
+                out
+            })
+            .collect();
         // The impostor replaces the cluster's representation: every
         // ancestor's gets cheaper by the difference.
         changes.sort_unstable_by_key(|x| x.0);
@@ -542,12 +560,15 @@ impl<'a> State<'a> {
         let node = self.cands[i as usize].node;
         let end = h.nodes[node as usize].subtree_end;
         let savings: Vec<(u32, Cost)> = changes.iter().map(|&(c, _, s)| (c, s)).collect();
+        let mut chain = Vec::new();
         let mut up = h.nodes[node as usize].parent;
         while up != u32::MAX {
-            self.marks
-                .adjust(up, &savings, &mut self.adjustments[up as usize]);
+            chain.push(up);
             up = h.nodes[up as usize].parent;
         }
+        chain.reverse();
+        self.marks
+            .adjust_all(&chain, &savings, &mut self.adjustments);
         let mut changed_cells: Vec<u32> = Vec::new();
         for (c, cost, _) in changes {
             let cu = c as usize;
@@ -712,7 +733,7 @@ mod tests {
                     (c, Cost { cpu: x, gpu: 0.0 })
                 })
                 .collect();
-            marks.adjust(n, &changes, &mut adjustments[n as usize]);
+            marks.adjust_all(&[n], &changes, &mut adjustments);
             for &(c, s) in &changes {
                 *want.entry((c, n)).or_default() += s.cpu;
             }
