@@ -40,7 +40,7 @@ impl State<'_> {
                 .filter(|&i| !self.fits(i))
                 .map(|i| {
                     let mut out = Vec::new();
-                    self.for_each_effect(i, true, |c, e| {
+                    self.for_each_unsolved_effect(i, |c, e| {
                         if e.accelerates && self.is_unsolved(c) {
                             out.push(c);
                         }

@@ -351,13 +351,13 @@ impl<'a> State<'a> {
         saved.min(excess).max(0.0)
     }
 
-    /// Calls `f(cpv, effect)` for every CPV candidate `i` may serve (only
-    /// in cells with CPVs above `t_max` when `unsolved_cells_only`).
-    fn for_each_effect(&self, i: u32, unsolved_cells_only: bool, mut f: impl FnMut(u32, Effect)) {
+    /// Calls `f(cpv, effect)` for every CPV candidate `i` may serve in
+    /// cells with CPVs above `t_max`.
+    fn for_each_unsolved_effect(&self, i: u32, mut f: impl FnMut(u32, Effect)) {
         let cand = &self.cands[i as usize];
         for &g in &self.all.served[cand.served.indices()] {
             let gr = self.all.pairs.group(g);
-            if unsolved_cells_only && self.unsolved_in_cell[gr.kd as usize] == 0 {
+            if self.unsolved_in_cell[gr.kd as usize] == 0 {
                 continue;
             }
             self.group_effects(i, gr, &mut f);
