@@ -88,12 +88,13 @@ fn bake_validates_and_looks_like_the_geometry() {
         .as_f64()
         .unwrap();
     assert!(mean <= p95 && p95 <= max, "{image}");
-    // Antialiased on both sides (0.029 / 0.047 measured; point-sampled
-    // images and layers, which keep or lose sub-pixel features by chance,
-    // give 0.049 / 0.081 with the same half-pixel matching, 0.074 / 0.130
-    // without it).
+    // Antialiased on both sides, the layers sharpened against the lookup's
+    // blur (0.0227 / 0.0476 measured; unsharpened 0.0286 / 0.0471;
+    // point-sampled images and layers, which keep or lose sub-pixel
+    // features by chance, give 0.049 / 0.081 with the same half-pixel
+    // matching, 0.074 / 0.130 without it).
     assert!(
-        mean <= 0.04,
+        mean <= 0.026,
         "mean mismatch {mean} over impostor pixels: {image}"
     );
     assert!(

@@ -24,6 +24,7 @@ mod file;
 mod formats;
 pub mod ktx2;
 pub mod mips;
+mod sharpen;
 
 pub use file::read_layers;
 
@@ -252,7 +253,7 @@ fn render_impostor(
             impostor: imp.id,
             index: k as u32,
             res,
-            rgba: dilate(&raster.resolve().concat(), res),
+            rgba: dilate(&sharpen::sharpen(&raster.resolve(), res).concat(), res),
             corners: [
                 view.unproject(0.0, 0.0, mid),
                 view.unproject(0.0, r, mid),

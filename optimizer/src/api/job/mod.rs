@@ -370,9 +370,9 @@ pub struct MemoryParams {
     /// Texels per screen pixel at an impostor's closest viewpoint (per
     /// side). Default 1: a texel is a pixel there, as the design's
     /// resolution formula says. More keeps what the geometry shows through
-    /// the bilinear resampling of the layers (`evaluate --images` measures
-    /// it: at 2 the quarter city's footprint mismatch falls from 2.9 % to
-    /// 2.0 %) at that factor squared in memory.
+    /// the bilinear resampling of the layers, which the bake's sharpening
+    /// only partly offsets (`evaluate --images` measures it), at that
+    /// factor squared in memory.
     #[serde(default = "default_texels_per_pixel")]
     pub texels_per_pixel: f64,
     /// The format impostor atlases are baked in (`png` or `ktx2`). When
