@@ -19,13 +19,16 @@
 //! descending boxes; neighbouring leaves drawing the same impostors are
 //! merged.
 
+use std::collections::HashMap;
+
 use glam::DVec3;
 
 use serde_json::json;
 
-use super::tiles::{Aabb, Content, Refine, Tile};
+use super::tiles::{Content, Refine, Tile, tiles_box, tiles_sphere};
 use crate::Result;
 use crate::api::placement::Placement;
+use crate::math::geom::Aabb;
 use crate::scene::Scene;
 
 /// A box of viewer positions and what the group draws there.
@@ -79,27 +82,35 @@ pub(super) fn group_switches(placement: &Placement, groups: &[&[u32]]) -> Vec<Op
     }
     // Per group, the regions drawing some of its impostors, each once, with
     // the group's impostors drawn in any of its CPVs.
+    // (A region is found again by its corners' bits, `+ 0.0` making the
+    // two zeros one, as `==` on the coordinates would.)
     let mut regions: Vec<Vec<(Aabb, Vec<u32>)>> = vec![Vec::new(); groups.len()];
+    let mut index: Vec<HashMap<[u64; 6], usize>> = vec![HashMap::new(); groups.len()];
     for cpv in &placement.cpvs {
         let b = Aabb {
             min: DVec3::from_array(cpv.region.min),
             max: DVec3::from_array(cpv.region.max),
         };
+        let key: [u64; 6] = std::array::from_fn(|k| {
+            let v = if k < 3 { b.min[k] } else { b.max[k - 3] };
+            (v + 0.0).to_bits()
+        });
         for &i in &cpv.impostors {
             let Some(g) = group_of.get(i as usize).copied().flatten() else {
                 continue;
             };
-            match regions[g].iter_mut().find(|(r, _)| *r == b) {
-                Some((_, ids)) => ids.push(i),
-                None => regions[g].push((b, vec![i])),
-            }
+            let at = *index[g].entry(key).or_insert_with(|| {
+                regions[g].push((b, Vec::new()));
+                regions[g].len() - 1
+            });
+            regions[g][at].1.push(i);
         }
     }
     regions
         .into_iter()
         .map(|regions| {
             let first = regions.first()?.0;
-            let bounds = regions.iter().fold(first, |u, (r, _)| u.union(*r));
+            let bounds = regions.iter().fold(first, |u, (r, _)| u.union(r));
             let all: Vec<usize> = (0..regions.len()).collect();
             Some(cut(placement, &regions, bounds, &all))
         })
@@ -144,7 +155,7 @@ fn cut(
         // No region crosses the box: each holds it or misses it.
         let mut drawn: Vec<u32> = live
             .iter()
-            .filter(|&&k| contains(&regions[k].0, &bounds))
+            .filter(|&&k| regions[k].0.contains_box(&bounds))
             .flat_map(|&k| regions[k].1.iter().copied())
             .collect();
         drawn.sort_unstable();
@@ -179,10 +190,6 @@ fn cut(
             parts: Box::new(parts),
         },
     }
-}
-
-fn contains(outer: &Aabb, inner: &Aabb) -> bool {
-    (0..3).all(|a| outer.min[a] <= inner.min[a] && inner.max[a] <= outer.max[a])
 }
 
 /// Of impostors `ids` (ascending), the ones drawn together: by objects
@@ -256,7 +263,7 @@ impl GroupTiles<'_> {
                     covered.extend_from_slice(&imp.objects);
                     if let Some((content, quads)) = &self.impostor_content[id as usize] {
                         children.push(Tile {
-                            bounding_volume: quads.to_tiles(),
+                            bounding_volume: tiles_box(quads),
                             viewer_request_volume: None,
                             geometric_error: 0.0,
                             refine: None,
@@ -283,13 +290,13 @@ impl GroupTiles<'_> {
                 if let Some(content) = content {
                     let bounds = rest.iter().fold(Aabb::EMPTY, |b, &o| {
                         let ob = &self.scene.objects[o as usize];
-                        b.union(Aabb {
+                        b.union(&Aabb {
                             min: ob.min,
                             max: ob.max,
                         })
                     });
                     children.push(Tile {
-                        bounding_volume: bounds.to_tiles(),
+                        bounding_volume: tiles_box(&bounds),
                         viewer_request_volume: None,
                         geometric_error: 0.0,
                         refine: None,
@@ -308,8 +315,8 @@ impl GroupTiles<'_> {
             // may be drawn, a child outside its request volume included;
             // it does not do so for spheres, so outside the switch the
             // cluster tile's geometry is drawn.
-            bounding_volume: self.bounds.to_tiles_sphere(),
-            viewer_request_volume: Some(s.bounds().to_tiles()),
+            bounding_volume: tiles_sphere(&self.bounds),
+            viewer_request_volume: Some(tiles_box(&s.bounds())),
             geometric_error: self.error,
             refine: Some(Refine::Add),
             content: None,

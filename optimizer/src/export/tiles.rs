@@ -64,6 +64,7 @@ use super::switch::{GroupTiles, Switch, group_switches};
 use crate::api::job::Job;
 use crate::api::placement::{Placement, Summary};
 use crate::bake::{BakeOptions, Layer, read_layers, write_glb};
+use crate::math::geom::Aabb;
 use crate::scene::Scene;
 use crate::scene::geometry::SceneGeometry;
 use crate::scene::glb::scene_extras;
@@ -149,50 +150,22 @@ pub struct Content {
     pub uri: String,
 }
 
-/// An axis-aligned box, y-up (glTF) world coordinates.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Aabb {
-    /// Minimum corner.
-    pub min: DVec3,
-    /// Maximum corner.
-    pub max: DVec3,
+/// The 3D Tiles box of a y-up (glTF) box, in the z-up frame. Half-axes
+/// are at least a millimetre, so flat contents get a proper box.
+pub fn tiles_box(b: &Aabb) -> BoundingVolume {
+    let (min, max) = (z_up(b.min), z_up(b.max));
+    let (lo, hi) = (min.min(max), min.max(max));
+    let c = (lo + hi) * 0.5;
+    let h = ((hi - lo) * 0.5).max(DVec3::splat(1e-3));
+    BoundingVolume::Box([c.x, c.y, c.z, h.x, 0.0, 0.0, 0.0, h.y, 0.0, 0.0, 0.0, h.z])
 }
 
-impl Aabb {
-    pub(super) const EMPTY: Aabb = Aabb {
-        min: DVec3::splat(f64::INFINITY),
-        max: DVec3::splat(f64::NEG_INFINITY),
-    };
-
-    fn add(&mut self, p: DVec3) {
-        self.min = self.min.min(p);
-        self.max = self.max.max(p);
-    }
-
-    pub(super) fn union(self, o: Aabb) -> Aabb {
-        Aabb {
-            min: self.min.min(o.min),
-            max: self.max.max(o.max),
-        }
-    }
-
-    /// The 3D Tiles box of this y-up box, in the z-up frame. Half-axes are
-    /// at least a millimetre, so flat contents get a proper box.
-    pub fn to_tiles(self) -> BoundingVolume {
-        let (min, max) = (z_up(self.min), z_up(self.max));
-        let (lo, hi) = (min.min(max), min.max(max));
-        let c = (lo + hi) * 0.5;
-        let h = ((hi - lo) * 0.5).max(DVec3::splat(1e-3));
-        BoundingVolume::Box([c.x, c.y, c.z, h.x, 0.0, 0.0, 0.0, h.y, 0.0, 0.0, 0.0, h.z])
-    }
-
-    /// The 3D Tiles sphere around this y-up box, in the z-up frame (radius
-    /// at least a millimetre).
-    pub fn to_tiles_sphere(self) -> BoundingVolume {
-        let c = z_up((self.min + self.max) * 0.5);
-        let r = (0.5 * self.min.distance(self.max)).max(1e-3);
-        BoundingVolume::Sphere([c.x, c.y, c.z, r])
-    }
+/// The 3D Tiles sphere around a y-up box, in the z-up frame (radius at
+/// least a millimetre).
+pub fn tiles_sphere(b: &Aabb) -> BoundingVolume {
+    let c = z_up(b.center());
+    let r = (0.5 * b.min.distance(b.max)).max(1e-3);
+    BoundingVolume::Sphere([c.x, c.y, c.z, r])
 }
 
 /// A y-up (glTF) point in the z-up frame of 3D Tiles.
@@ -309,18 +282,18 @@ pub fn export(scene: &Scene, geom: &SceneGeometry, input: &TilesInput<'_>) -> Re
         let group_box = |objects: &[u32]| {
             objects
                 .iter()
-                .fold(Aabb::EMPTY, |b, &o| b.union(object_box(o)))
+                .fold(Aabb::EMPTY, |b, &o| b.union(&object_box(o)))
         };
         let mut tile_box = group_box(objects);
         for &id in impostors {
             if let Some((_, quads)) = &impostor_content[id as usize] {
-                tile_box = tile_box.union(*quads);
+                tile_box = tile_box.union(quads);
             }
         }
         let switch = &switches[g];
         let reach = switch
             .as_ref()
-            .map_or(tile_box, |s| tile_box.union(s.bounds()));
+            .map_or(tile_box, |s| tile_box.union(&s.bounds()));
         // The farthest a viewer in any of its leaves is from it.
         let error = refining_error(job, reach.min.distance(reach.max));
         let name = format!("cluster-{g}.glb");
@@ -349,10 +322,10 @@ pub fn export(scene: &Scene, geom: &SceneGeometry, input: &TilesInput<'_>) -> Re
             })?],
             None => Vec::new(),
         };
-        all = all.union(reach);
+        all = all.union(&reach);
         child_boxes.push(tile_box);
         children.push(Tile {
-            bounding_volume: tile_box.to_tiles(),
+            bounding_volume: tiles_box(&tile_box),
             viewer_request_volume: None,
             geometric_error: error,
             refine: Some(Refine::Replace),
@@ -366,10 +339,10 @@ pub fn export(scene: &Scene, geom: &SceneGeometry, input: &TilesInput<'_>) -> Re
         .collect();
     let mut root_box = Aabb::EMPTY;
     for &o in &rest {
-        root_box = root_box.union(object_box(o));
+        root_box = root_box.union(&object_box(o));
     }
     for &b in &child_boxes {
-        root_box = root_box.union(b);
+        root_box = root_box.union(&b);
     }
     let name = "scene.glb".to_string();
     let root_content = objects_glb(geom, &by_object, &rest, &name)?.map(|glb| {
@@ -387,7 +360,7 @@ pub fn export(scene: &Scene, geom: &SceneGeometry, input: &TilesInput<'_>) -> Re
         },
         geometric_error: 2.0 * root_error,
         root: Tile {
-            bounding_volume: root_box.to_tiles(),
+            bounding_volume: tiles_box(&root_box),
             viewer_request_volume: None,
             geometric_error: root_error,
             refine: Some(Refine::Add),
@@ -524,7 +497,7 @@ mod tests {
             max: DVec3::new(4.0, 5.0, 6.0),
         };
         assert_eq!(z_up(DVec3::new(1.0, 2.0, 3.0)), DVec3::new(1.0, -3.0, 2.0));
-        let BoundingVolume::Box(t) = b.to_tiles() else {
+        let BoundingVolume::Box(t) = tiles_box(&b) else {
             panic!("a box")
         };
         // Centre (2.5, 3.5, 4.5) y-up is (2.5, −4.5, 3.5) z-up; half sizes

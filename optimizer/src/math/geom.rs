@@ -20,9 +20,22 @@ pub struct Aabb {
 }
 
 impl Aabb {
+    /// The empty box, which [`union`](Self::union) and
+    /// [`add`](Self::add) grow from.
+    pub const EMPTY: Aabb = Aabb {
+        min: DVec3::splat(f64::INFINITY),
+        max: DVec3::splat(f64::NEG_INFINITY),
+    };
+
     /// A box from its corners.
     pub fn new(min: DVec3, max: DVec3) -> Self {
         Aabb { min, max }
+    }
+
+    /// Grows the box to hold `p`.
+    pub fn add(&mut self, p: DVec3) {
+        self.min = self.min.min(p);
+        self.max = self.max.max(p);
     }
 
     /// The smallest box holding both.
