@@ -166,12 +166,33 @@ impl NodeMarks {
             .for_each(|(row, a)| adjust_row(row, changes, a));
     }
 
-    /// Marks `a..b` covered in CPV `c`.
-    pub(super) fn cover(&mut self, c: u32, a: u32, b: u32) {
-        let (word, bit) = (3 * (c as usize / 64), c % 64);
-        for n in a..b {
-            self.bits[n as usize * self.row + word] |= 1 << bit;
+    /// Marks nodes `a..b` covered in each CPV of `cpvs` (ascending): the
+    /// CPVs' bits gathered into words once, then each node's row, the rows
+    /// in parallel (a row is a few kilobytes apart from the next, so CPV by
+    /// CPV every node would be a cache miss).
+    pub(super) fn cover_all(&mut self, a: u32, b: u32, cpvs: impl IntoIterator<Item = u32>) {
+        use rayon::prelude::*;
+        let mut masks: Vec<(usize, u64)> = Vec::new();
+        for c in cpvs {
+            let (word, bit) = (3 * (c as usize / 64), c % 64);
+            match masks.last_mut() {
+                Some((w, m)) if *w == word => *m |= 1 << bit,
+                _ => masks.push((word, 1 << bit)),
+            }
         }
+        if masks.is_empty() {
+            return;
+        }
+        let rows = &mut self.bits[a as usize * self.row..b as usize * self.row];
+        // Rows at a time enough to outweigh handing them to another thread.
+        let min_rows = (4096 / masks.len()).max(1);
+        rows.par_chunks_mut(self.row)
+            .with_min_len(min_rows)
+            .for_each(|row| {
+                for &(w, m) in &masks {
+                    row[w] |= m;
+                }
+            });
     }
 }
 

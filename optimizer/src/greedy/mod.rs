@@ -569,13 +569,17 @@ impl<'a> State<'a> {
         chain.reverse();
         self.marks
             .adjust_all(&chain, &savings, &mut self.adjustments);
+        // Only a cluster adjusted in a CPV has impostors below it there.
+        let below: Vec<bool> = changes
+            .iter()
+            .map(|&(c, _, _)| matches!(self.marks.get(c, node), Mark::Adjusted(_)))
+            .collect();
+        self.marks
+            .cover_all(node, end, changes.iter().map(|&(c, _, _)| c));
         let mut changed_cells: Vec<u32> = Vec::new();
-        for (c, cost, _) in changes {
+        for ((c, cost, _), below) in changes.into_iter().zip(below) {
             let cu = c as usize;
             let cpv = &self.pv.cpvs[cu];
-            // Only a cluster adjusted in the CPV has impostors below it there.
-            let below = matches!(self.marks.get(c, node), Mark::Adjusted(_));
-            self.marks.cover(c, node, end);
             let imps = &mut self.sel.cpv_impostors[cu];
             if below {
                 let cands = self.cands;
@@ -709,6 +713,25 @@ mod tests {
     /// The node-major marks with their batched rank directory agree with
     /// a plain map of (CPV, cluster) to adjustment.
     #[test]
+    fn covering_marks_a_subtree_in_every_cpv_given_and_no_other() {
+        // 200 CPVs: four words of bits, CPVs in the first, third and
+        // fourth; nodes 2..7 of 10.
+        let mut marks = NodeMarks::new(200, 10);
+        let cpvs = [1u32, 5, 63, 130, 199];
+        marks.cover_all(2, 7, cpvs);
+        for n in 0..10 {
+            for c in 0..200 {
+                let want = (2..7).contains(&n) && cpvs.contains(&c);
+                assert_eq!(marks.get(c, n) == Mark::Covered, want, "CPV {c}, node {n}");
+            }
+        }
+        // An empty set and an empty range change nothing.
+        marks.cover_all(0, 10, []);
+        marks.cover_all(8, 8, [0]);
+        assert!((0..200).all(|c| marks.get(c, 0) == Mark::Plain && marks.get(c, 8) == Mark::Plain));
+    }
+
+    #[test]
     fn marks_and_adjustments_match_a_map() {
         use std::collections::BTreeMap;
         let (cpvs, nodes) = (300usize, 9usize);
@@ -739,7 +762,7 @@ mod tests {
             }
             if round % 17 == 0 {
                 let c = cs[0];
-                marks.cover(c, n, n + 1);
+                marks.cover_all(n, n + 1, [c]);
                 covered.insert((c, n));
             }
         }
