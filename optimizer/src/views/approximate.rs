@@ -31,7 +31,16 @@ fn build_kd(grid: &Grid) -> Vec<KdNode> {
             2
         };
         if sizes[axis] > 1 {
-            let mid = lo[axis] + sizes[axis] / 2;
+            // At the grid plane nearest the box's middle (the lower of
+            // two as near): the view space's side cells are cut by the
+            // grid's phase, so half the cell count would put a box's sides
+            // up to a cell off its middle at every level, differently for
+            // each phase.
+            let centre = 0.5 * (grid.boundary(axis, lo[axis]) + grid.boundary(axis, hi[axis]));
+            let off = |m: u32| (grid.boundary(axis, m) - centre).abs();
+            let mid = (lo[axis] + 1..hi[axis])
+                .min_by(|&a, &b| off(a).total_cmp(&off(b)))
+                .expect("a range of two cells or more has an inner boundary");
             let (mut hi_l, mut lo_r) = (hi, lo);
             hi_l[axis] = mid;
             lo_r[axis] = mid;
@@ -565,7 +574,39 @@ pub fn approximate(ctx: &Context, job: &Job, counters: &Counters) -> ProblemView
 
 #[cfg(test)]
 mod tests {
+    use glam::DVec3;
+
     use super::*;
+
+    /// A kd node splits at the grid plane nearest its middle, wherever the
+    /// grid's phase puts the thin cells at the view space's sides.
+    #[test]
+    fn kd_nodes_split_at_the_plane_nearest_their_middle() {
+        // 100 × 1 × 1 m, cells of 23 m anchored at 11.5: planes at 11.5,
+        // 34.5, 57.5, 80.5, so five cells; half the count would split at
+        // 34.5, 15.5 m off the middle, the nearest plane is 57.5.
+        let grid = Grid::new(
+            DVec3::ZERO,
+            DVec3::new(100.0, 1.0, 1.0),
+            23.0,
+            DVec3::splat(11.5),
+        );
+        assert_eq!(grid.counts, [5, 1, 1]);
+        let kd = build_kd(&grid);
+        let [l, r] = kd[0].children.expect("five cells split");
+        assert_eq!(kd[l as usize].aabb.max.x, 57.5);
+        assert_eq!(kd[r as usize].aabb.min.x, 57.5);
+        // Its left part, 0..57.5 (planes 11.5, 34.5): the middle 28.75 is
+        // nearest 34.5; its right part, 57.5..100: 80.5.
+        let [ll, _] = kd[l as usize].children.unwrap();
+        assert_eq!(kd[ll as usize].aabb.max.x, 34.5);
+        let [rl, _] = kd[r as usize].children.unwrap();
+        assert_eq!(kd[rl as usize].aabb.max.x, 80.5);
+        // Every leaf is one cell, each cell one leaf.
+        let leaves: Vec<&KdNode> = kd.iter().filter(|n| n.children.is_none()).collect();
+        assert_eq!(leaves.len(), 5);
+        assert!(leaves.iter().all(|n| n.hi[0] - n.lo[0] == 1));
+    }
 
     /// Every VDI down to the leaf level has a bit of its own, and a set
     /// holds exactly its leaves and their ancestors.
