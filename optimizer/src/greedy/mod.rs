@@ -710,8 +710,8 @@ mod tests {
     use crate::views;
     use crate::views::Counters;
 
-    /// The node-major marks with their batched rank directory agree with
-    /// a plain map of (CPV, cluster) to adjustment.
+    /// Covering a subtree marks its nodes in exactly the CPVs given,
+    /// across words of the CPV bitsets.
     #[test]
     fn covering_marks_a_subtree_in_every_cpv_given_and_no_other() {
         // 200 CPVs: four words of bits, CPVs in the first, third and
@@ -731,6 +731,8 @@ mod tests {
         assert!((0..200).all(|c| marks.get(c, 0) == Mark::Plain && marks.get(c, 8) == Mark::Plain));
     }
 
+    /// The node-major marks with their batched rank directory agree with
+    /// a plain map of (CPV, cluster) to adjustment.
     #[test]
     fn marks_and_adjustments_match_a_map() {
         use std::collections::BTreeMap;
