@@ -32,9 +32,11 @@ pub fn stderr(o: &Output) -> String {
     String::from_utf8_lossy(&o.stderr).into_owned()
 }
 
-/// A fresh temporary directory for one test.
+/// A fresh temporary directory for one test, under Cargo's directory for
+/// integration tests' temporary data: the next run replaces it, so runs do not
+/// pile up (a failed test's files stay there to be looked at).
 pub fn tmp(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("impostor-e2e-{}-{name}", std::process::id()));
+    let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join(format!("e2e-{name}"));
     let _ = std::fs::remove_dir_all(&dir);
     std::fs::create_dir_all(&dir).unwrap();
     dir

@@ -14,4 +14,6 @@ node tools/tiles-client/build.mjs
 npm ci --prefix tools/cesium-client
 node tools/cesium-client/build.mjs
 cargo test --workspace --release
-IMPOSTOR_TEST_DATABASE=postgres cargo test --release -p server --test http --test admission
+# `--workspace` as above, so the same build is used (`-p server` alone would
+# unify features differently and build everything a second time).
+IMPOSTOR_TEST_DATABASE=postgres cargo test --workspace --release --test http --test admission

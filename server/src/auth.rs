@@ -371,6 +371,7 @@ mod tests {
         std::fs::remove_file(&path).unwrap();
         tokens.refresh();
         assert_eq!(tokens.tenant(&b), None);
+        let _ = std::fs::remove_dir_all(path.parent().unwrap());
     }
 
     /// A missing tokens file says how to make one; a malformed one names
@@ -391,5 +392,6 @@ mod tests {
         let e = Tokens::open(&path).err().unwrap();
         assert!(e.to_string().contains("64 hex"), "{e}");
         assert!(add(&path, "t").is_err(), "a bad file is not overwritten");
+        let _ = std::fs::remove_dir_all(path.parent().unwrap());
     }
 }

@@ -16,7 +16,9 @@ use server::Config;
 mod common;
 
 fn temp_dir(name: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("impostor-tenants-{name}-{}", std::process::id()));
+    // Under Cargo's directory for tests' temporary data: the next run
+    // replaces it, so runs do not pile up.
+    let d = Path::new(env!("CARGO_TARGET_TMPDIR")).join(format!("admission-{name}"));
     let _ = std::fs::remove_dir_all(&d);
     std::fs::create_dir_all(&d).unwrap();
     d

@@ -1,7 +1,7 @@
 //! The service over a real TCP listener on 127.0.0.1.
 
 use std::net::SocketAddr;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
 use common::{city, city_summary, start};
@@ -31,7 +31,9 @@ fn job_json() -> Vec<u8> {
 }
 
 fn temp_dir(name: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("impostor-server-{name}-{}", std::process::id()));
+    // Under Cargo's directory for tests' temporary data: the next run
+    // replaces it, so runs do not pile up.
+    let d = Path::new(env!("CARGO_TARGET_TMPDIR")).join(format!("http-{name}"));
     let _ = std::fs::remove_dir_all(&d);
     d
 }
