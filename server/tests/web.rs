@@ -342,6 +342,57 @@ fn footprint_view(b: &mut Browser, placement: &Value) -> (u64, u64, u64, u64) {
     best
 }
 
+/// The viewer's object ids name the optimizer's objects: every object's
+/// drawn box is the box the optimizer loaded for that id from `glb`.
+fn assert_object_boxes(b: &mut Browser, glb: &[u8]) {
+    let scene = optimizer::scene::gltf_load::load_scene_bytes(glb, "scene").unwrap();
+    let boxes = b.eval("impostorViewer.objectMeshes.map((_, i) => impostorViewer.objectBox(i))");
+    let boxes = boxes.as_array().unwrap();
+    assert_eq!(boxes.len(), scene.objects.len());
+    for (i, (b, o)) in boxes.iter().zip(&scene.objects).enumerate() {
+        for (k, want) in [("min", o.min), ("max", o.max)] {
+            for a in 0..3 {
+                let got = b[k][a]
+                    .as_f64()
+                    .unwrap_or_else(|| panic!("object {i}: the viewer has no mesh for it ({b})"));
+                assert!(
+                    (got - want[a]).abs() < 1e-3 * (1.0 + want[a].abs()),
+                    "object {i} ({}) {k}[{a}]: the viewer's {got}, the optimizer's {}",
+                    o.name,
+                    want[a]
+                );
+            }
+        }
+    }
+}
+
+/// The tenth-scale city with its repeated meshes drawn as GPU instances
+/// (`gltfpack -noq -mi`: `EXT_mesh_gpu_instancing`), as game maps ship
+/// forests and props.
+fn instanced_city(dir: &std::path::Path) -> Vec<u8> {
+    let city = dir.join("city-plain.glb");
+    std::fs::write(&city, common::city(0.1)).unwrap();
+    let out = dir.join("city-instanced.glb");
+    let cli = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../tools/gltfpack/node_modules/gltfpack/cli.js"
+    );
+    let o = Command::new("node")
+        .arg(cli)
+        .args(["-noq", "-mi", "-i"])
+        .arg(&city)
+        .arg("-o")
+        .arg(&out)
+        .output()
+        .expect("run node (gltfpack: npm ci --prefix tools/gltfpack)");
+    assert!(
+        o.status.success(),
+        "gltfpack: {}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    std::fs::read(out).unwrap()
+}
+
 /// A view in `cpv`: its region's centre looking along its VDI's centre.
 fn view_in(cpv: &Value) -> ([f64; 3], [f64; 3]) {
     let r = &cpv["region"];
@@ -515,26 +566,7 @@ fn the_page_submits_a_job_follows_it_and_views_its_impostors() {
     got.sort();
     assert_eq!(got, want);
 
-    // The viewer's object ids name the optimizer's objects: every object's
-    // drawn box is the box the optimizer loaded for that id.
-    let scene = optimizer::scene::gltf_load::load_scene_bytes(&glb, "city").unwrap();
-    let boxes = b.eval("impostorViewer.objectMeshes.map((_, i) => impostorViewer.objectBox(i))");
-    let boxes = boxes.as_array().unwrap();
-    assert_eq!(boxes.len(), scene.objects.len());
-    for (i, (b, o)) in boxes.iter().zip(&scene.objects).enumerate() {
-        for (k, want) in [("min", o.min), ("max", o.max)] {
-            for a in 0..3 {
-                let got = b[k][a]
-                    .as_f64()
-                    .unwrap_or_else(|| panic!("object {i}: the viewer has no mesh for it ({b})"));
-                assert!(
-                    (got - want[a]).abs() < 1e-3 * (1.0 + want[a].abs()),
-                    "object {i} {k}[{a}]: the viewer's {got}, the optimizer's {}",
-                    want[a]
-                );
-            }
-        }
-    }
+    assert_object_boxes(&mut b, &glb);
 
     // A walk of 100 frames along the path: at every frame the CPV shown is
     // the placement's CPV of the camera's view (found here from the
@@ -673,6 +705,8 @@ fn the_page_submits_a_job_follows_it_and_views_its_impostors() {
 /// Impostors baked as KTX2 (`memory.texture_format`, Basis Universal
 /// UASTC with mip levels) load in the viewer through three.js's KTX2Loader
 /// and the transcoder the server serves, and cover what their objects did.
+/// The scene draws its repeated meshes as GPU instances: the viewer numbers
+/// each instance as the optimizer does and hides instances one by one.
 #[test]
 fn the_viewer_shows_impostors_baked_as_ktx2() {
     let Some(mut b) = Browser::start() else {
@@ -680,7 +714,8 @@ fn the_viewer_shows_impostors_baked_as_ktx2() {
     };
     let (mut child, addr, dir) = spawn("ktx2");
     let scene_path = dir.join("city.glb");
-    std::fs::write(&scene_path, common::city(0.1)).unwrap();
+    let scene_glb = instanced_city(&dir);
+    std::fs::write(&scene_path, &scene_glb).unwrap();
     let mut job = common::process::small_job();
     job["memory"] = json!({"texture_format": "ktx2"});
     b.navigate(&format!("http://{addr}/#/submit"));
@@ -714,6 +749,12 @@ fn the_viewer_shows_impostors_baked_as_ktx2() {
         assert!(t["width"].as_u64().unwrap() > 0, "{t}");
         assert!(t["mipmaps"].as_u64().unwrap() > 1, "{t}");
     }
+    let instances = b.eval("impostorViewer.objectInstance.filter((k) => k !== null).length");
+    assert!(
+        instances.as_u64().unwrap() > 100,
+        "{instances} GPU instances"
+    );
+    assert_object_boxes(&mut b, &scene_glb);
     let (cpv, pixels, footprint, mismatch) = footprint_view(&mut b, &placement);
     eprintln!("KTX2: CPV {cpv}: footprint {footprint} of {pixels} pixels, mismatch {mismatch}");
     assert!(

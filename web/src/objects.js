@@ -2,8 +2,9 @@
 // of optimizer/src/scene/gltf_load/walk.rs, ARCHITECTURE.md "Object ids"):
 // a depth-first pre-order walk of the default scene (`scene`, else scene
 // 0), roots and children in array order, counting each node that carries a
-// mesh; a node named as a coarser level of detail by another node's
-// `MSFT_lod.ids` is not an object and its subtree is not walked.
+// mesh, once per instance when it has `EXT_mesh_gpu_instancing`; a node named
+// as a coarser level of detail by another node's `MSFT_lod.ids` is not an
+// object and its subtree is not walked.
 
 /// The JSON chunk of a GLB file.
 export function glbJson(buffer) {
@@ -16,8 +17,20 @@ export function glbJson(buffer) {
   return JSON.parse(new TextDecoder().decode(new Uint8Array(buffer, 20, length)));
 }
 
-/// `{objects, levels}`: the glTF node index of each object id, in id order,
-/// and the node indices that are `MSFT_lod` levels.
+/// The number of GPU instances of `node` (`EXT_mesh_gpu_instancing`: the
+/// count of its attributes' accessors), `null` without the extension.
+function instanceCount(gltf, node) {
+  const ext = node.extensions && node.extensions.EXT_mesh_gpu_instancing;
+  if (!ext || !ext.attributes) return null;
+  const a = ext.attributes.TRANSLATION ?? ext.attributes.ROTATION ?? ext.attributes.SCALE;
+  const accessor = a === undefined ? undefined : (gltf.accessors || [])[a];
+  if (!accessor) throw new Error("a node's EXT_mesh_gpu_instancing names no accessor");
+  return accessor.count;
+}
+
+/// `{objects, instances, levels}`: the glTF node index of each object id, in
+/// id order; which GPU instance of its node each object is (`null` for a
+/// node drawn once); and the node indices that are `MSFT_lod` levels.
 export function objectNodes(gltf) {
   const nodes = gltf.nodes || [];
   const levels = new Set();
@@ -28,7 +41,8 @@ export function objectNodes(gltf) {
   const scenes = gltf.scenes || [];
   const scene = scenes[gltf.scene ?? 0];
   const objects = [];
-  if (!scene) return { objects, levels };
+  const instances = [];
+  if (!scene) return { objects, instances, levels };
   const stack = [...(scene.nodes || [])].reverse();
   const seen = new Set();
   while (stack.length) {
@@ -38,8 +52,19 @@ export function objectNodes(gltf) {
     seen.add(n);
     if (levels.has(n)) continue;
     const node = nodes[n];
-    if (node.mesh !== undefined) objects.push(n);
+    if (node.mesh !== undefined) {
+      const count = instanceCount(gltf, node);
+      if (count === null) {
+        objects.push(n);
+        instances.push(null);
+      } else {
+        for (let k = 0; k < count; k++) {
+          objects.push(n);
+          instances.push(k);
+        }
+      }
+    }
     if (node.children) stack.push(...[...node.children].reverse());
   }
-  return { objects, levels };
+  return { objects, instances, levels };
 }

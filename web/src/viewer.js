@@ -85,6 +85,22 @@ async function load(id, renderer) {
   return { params, placement, scene, sceneJson, nodeObjects, impostors };
 }
 
+/// The instance matrices `mesh` was loaded with (kept before any instance
+/// is hidden).
+function instanceMatrices(mesh) {
+  if (!mesh.userData.loadedMatrices) mesh.userData.loadedMatrices = mesh.instanceMatrix.array.slice();
+  return mesh.userData.loadedMatrices;
+}
+
+/// Shows instance `k` of an instanced mesh with its loaded matrix, or hides
+/// it (a zero matrix: it draws nothing); layers hide whole meshes only.
+function showInstance(mesh, k, on) {
+  const loaded = instanceMatrices(mesh);
+  const a = mesh.instanceMatrix.array;
+  for (let i = 16 * k; i < 16 * k + 16; i++) a[i] = on ? loaded[i] : 0;
+  mesh.instanceMatrix.needsUpdate = true;
+}
+
 class Viewer {
   constructor(root, renderer, { params, placement, scene, sceneJson, nodeObjects, impostors }, signal) {
     this.root = root;
@@ -158,7 +174,7 @@ class Viewer {
   /// three.js object of each glTF node (the loader's node cache; its
   /// associations are shared between the instances of a mesh).
   mapScene(gltf, sceneJson, nodeObjects) {
-    const { objects, levels } = objectNodes(sceneJson);
+    const { objects, instances, levels } = objectNodes(sceneJson);
     const isNode = new Set(nodeObjects);
     const own = (o) => {
       const out = o.isMesh ? [o] : [];
@@ -166,6 +182,8 @@ class Viewer {
       return out;
     };
     this.objectMeshes = objects.map((n) => own(nodeObjects[n]));
+    // A GPU instance is one instance of its node's instanced meshes.
+    this.objectInstance = instances;
     // Coarser levels of detail are not drawn: objects show their own level.
     this.hiddenLevels = new Set([...levels].map((n) => nodeObjects[n]));
     for (const o of this.hiddenLevels) o.visible = false;
@@ -296,7 +314,11 @@ class Viewer {
     const hidden = new Set();
     for (const i of active) for (const o of this.placement.impostors[i].objects) hidden.add(o);
     this.objectMeshes.forEach((meshes, id) => {
-      for (const m of meshes) m.layers.set(hidden.has(id) ? HIDDEN : 0);
+      const k = this.objectInstance[id];
+      for (const m of meshes) {
+        if (k !== null && m.isInstancedMesh) showInstance(m, k, !hidden.has(id));
+        else m.layers.set(hidden.has(id) ? HIDDEN : 0);
+      }
     });
     let shown = 0;
     const on = new Set(active);
@@ -374,7 +396,18 @@ class Viewer {
   /// order against the optimizer's).
   objectBox(id) {
     const box = new THREE.Box3();
-    for (const m of this.objectMeshes[id] || []) box.expandByObject(m, false);
+    const k = this.objectInstance[id];
+    for (const m of this.objectMeshes[id] || []) {
+      if (k !== null && m.isInstancedMesh) {
+        // The instance's own box: the geometry's, by its shown matrix.
+        if (!m.geometry.boundingBox) m.geometry.computeBoundingBox();
+        const matrix = new THREE.Matrix4().fromArray(instanceMatrices(m), 16 * k);
+        m.updateWorldMatrix(true, false);
+        box.union(m.geometry.boundingBox.clone().applyMatrix4(matrix.premultiply(m.matrixWorld)));
+      } else {
+        box.expandByObject(m, false);
+      }
+    }
     return { min: box.min.toArray(), max: box.max.toArray() };
   }
 

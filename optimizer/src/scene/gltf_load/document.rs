@@ -115,7 +115,12 @@ pub(crate) fn precheck_root_with(
                 format!("the file requires {ext}, which is not supported; {hint}"),
             ));
         }
-        let read_here = ["MSFT_lod", "KHR_mesh_quantization", EXT_MESHOPT];
+        let read_here = [
+            "MSFT_lod",
+            "KHR_mesh_quantization",
+            EXT_MESHOPT,
+            EXT_INSTANCING,
+        ];
         if !APPEARANCE_EXTENSIONS.contains(&ext.as_str()) && !read_here.contains(&ext.as_str()) {
             return Err(Error::bad(
                 format!("{source}: extensionsRequired"),

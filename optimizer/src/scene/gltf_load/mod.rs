@@ -15,8 +15,19 @@
 //! transforms) and `EXT_meshopt_compression` buffer views (decoded by
 //! [`meshopt`] before any accessor is read, within
 //! [`MAX_DECODED_BYTES`]). Other geometry extensions a file requires
-//! (Draco, GPU instancing) and unknown required extensions are refused
-//! with an error naming them.
+//! (Draco) and unknown required extensions are refused with an error naming
+//! them.
+//!
+//! # GPU instancing (`EXT_mesh_gpu_instancing`)
+//!
+//! A node that draws its mesh once per instance (game maps' forests and
+//! props, `gltfpack -mi`, `gltf-transform instance`) is one object per
+//! instance, in instance order where the node's object would be, placed by
+//! the node's world transform × the instance's translation, rotation and
+//! scale (float or normalized-integer accessors). Its objects are named
+//! `name#k`. Attributes of other counts, missing accessors, rotations that
+//! are not unit quaternions and instances with `MSFT_lod` levels are
+//! errors naming the node.
 //!
 //! # Levels of detail (`MSFT_lod`)
 //!
@@ -104,17 +115,11 @@ const MAX_STRIDE: usize = 252;
 
 /// Extensions that change how geometry is stored or instanced; a file that
 /// requires one of them cannot be read by this loader.
-const GEOMETRY_EXTENSIONS: &[(&str, &str)] = &[
-    (
-        "KHR_draco_mesh_compression",
-        "decompress it first, e.g. `gltf-transform copy in.glb out.glb` or `gltfpack` (its \
+const GEOMETRY_EXTENSIONS: &[(&str, &str)] = &[(
+    "KHR_draco_mesh_compression",
+    "decompress it first, e.g. `gltf-transform copy in.glb out.glb` or `gltfpack` (its \
          quantized, meshopt-compressed output is read)",
-    ),
-    (
-        "EXT_mesh_gpu_instancing",
-        "expand the instances into nodes first",
-    ),
-];
+)];
 
 /// Extensions that only affect appearance (materials, textures, lights):
 /// placement ignores them, so a file that requires them still loads.
@@ -278,13 +283,16 @@ struct MeshInfo {
     draw_calls: u32,
 }
 
-/// One node of the scene that draws a mesh: an object.
+/// One node of the scene that draws a mesh, or one GPU instance of such a
+/// node: an object.
 pub(crate) struct Instance {
     pub(crate) node: usize,
     pub(crate) mesh: usize,
     pub(crate) world: DAffine3,
     /// Its coarser levels of detail, when the file gives them.
     pub(crate) lods: Option<LodChain>,
+    /// Which instance of the node's `EXT_mesh_gpu_instancing` it is.
+    pub(crate) gpu_instance: Option<u32>,
 }
 
 fn load_gltf_inner(bytes: &[u8], source: &str, base_dir: Option<&Path>) -> Result<Scene> {
@@ -297,7 +305,8 @@ fn load_gltf_inner(bytes: &[u8], source: &str, base_dir: Option<&Path>) -> Resul
 
     let mut buffers = resolve_buffers(&doc, blob.as_deref(), source, base_dir)?;
     let doc = decode_compressed_views(doc, &mut buffers, source)?;
-    let instances = walk_scene(&doc, source)?;
+    let mut instances = walk_scene(&doc, source)?;
+    place_gpu_instances(&doc, &buffers, &mut instances, source)?;
 
     // Read every mesh the scene uses once, in parallel; report the error of
     // the lowest mesh index so the message does not depend on scheduling.
@@ -352,11 +361,14 @@ fn load_gltf_inner(bytes: &[u8], source: &str, base_dir: Option<&Path>) -> Resul
             }
         }
         let node = &nodes[inst.node];
-        let name = match (node.name(), meshes[inst.mesh].name()) {
+        let mut name = match (node.name(), meshes[inst.mesh].name()) {
             (Some(n), _) if !n.is_empty() => n.to_string(),
             (_, Some(n)) if !n.is_empty() => n.to_string(),
             _ => format!("node_{}", inst.node),
         };
+        if let Some(k) = inst.gpu_instance {
+            name = format!("{name}#{k}");
+        }
         objects.push(Object {
             name,
             min,
@@ -1167,6 +1179,99 @@ mod tests {
         assert_eq!(load(&d.glb()).unwrap().objects.len(), 1);
     }
 
+    /// `EXT_mesh_gpu_instancing`: each instance is an object, in instance
+    /// order where the node's object would be, placed by the node's
+    /// transform × its own (translation, rotation, scale); malformed
+    /// instancing is an error naming the node.
+    #[test]
+    fn gpu_instances_are_objects() {
+        let build = |attributes: Value, lod: bool| {
+            let mut d = Doc::new();
+            let cube = d.cube();
+            let t = d.positions(&[[10.0, 0.0, 0.0], [0.0, 5.0, 0.0]]);
+            let h = std::f32::consts::FRAC_1_SQRT_2;
+            // Identity, then 90° about y; the third is not a rotation.
+            let quats: [[f32; 4]; 3] = [[0.0, 0.0, 0.0, 1.0], [0.0, h, 0.0, h], [0.0; 4]];
+            let bytes: Vec<u8> = quats
+                .iter()
+                .flatten()
+                .flat_map(|v| v.to_le_bytes())
+                .collect();
+            let view = d.view(&bytes, None);
+            let r = d.push(
+                "accessors",
+                json!({"bufferView": view, "componentType": 5126, "count": 2, "type": "VEC4"}),
+            );
+            let zero = d.push(
+                "accessors",
+                json!({"bufferView": view, "byteOffset": 16, "componentType": 5126, "count": 2,
+                       "type": "VEC4"}),
+            );
+            let sc = d.positions(&[[1.0, 1.0, 1.0], [2.0, 2.0, 2.0]]);
+            let one = d.positions(&[[1.0, 1.0, 1.0]]);
+            let mut attributes = attributes.to_string();
+            for (name, id) in [("T", t), ("R", r), ("Z", zero), ("S", sc), ("ONE", one)] {
+                attributes = attributes.replace(&format!("\"@{name}\""), &id.to_string());
+            }
+            let attributes: Value = serde_json::from_str(&attributes).unwrap();
+            let a = d.node(json!({"mesh": cube, "name": "a"}));
+            let mut trees = json!({"mesh": cube, "name": "trees", "translation": [0.0, 0.0, 100.0],
+                "extensions": {"EXT_mesh_gpu_instancing": {"attributes": attributes}}});
+            let level = d.node(json!({"mesh": cube}));
+            if lod {
+                trees["extensions"]["MSFT_lod"] = json!({"ids": [level]});
+                trees["extras"] = json!({"MSFT_screencoverage": [0.5, 0.1]});
+            }
+            let trees = d.node(trees);
+            let b = d.node(json!({"mesh": cube, "name": "b"}));
+            d.roots(&[a, trees, b]);
+            d.json["extensionsUsed"] = json!(["EXT_mesh_gpu_instancing"]);
+            d.json["extensionsRequired"] = json!(["EXT_mesh_gpu_instancing"]);
+            d.glb()
+        };
+        let all = json!({"TRANSLATION": "@T", "ROTATION": "@R", "SCALE": "@S"});
+        let scene = load(&build(all.clone(), false)).unwrap();
+        let names: Vec<&str> = scene.objects.iter().map(|o| o.name.as_str()).collect();
+        assert_eq!(names, ["a", "trees#0", "trees#1", "b"]);
+        assert_vec(scene.objects[1].min, [10.0, 0.0, 100.0]);
+        assert_vec(scene.objects[1].max, [11.0, 1.0, 101.0]);
+        // Scaled to [0, 2]³, turned about y ((x, y, z) -> (z, y, -x)),
+        // moved by (0, 5, 0), then by the node's (0, 0, 100).
+        assert_vec(scene.objects[2].min, [0.0, 5.0, 98.0]);
+        assert_vec(scene.objects[2].max, [2.0, 7.0, 100.0]);
+        assert_eq!(scene.objects[2].triangles, 12);
+        // Attributes left out are the identity's.
+        let only_t = load(&build(json!({"TRANSLATION": "@T"}), false)).unwrap();
+        assert_vec(only_t.objects[2].min, [0.0, 5.0, 100.0]);
+        // The geometry loader (what bakes render) places them alike.
+        let g = crate::scene::geometry::load_geometry_bytes(&build(all.clone(), false), "t.glb")
+            .unwrap();
+        assert_eq!(g.objects, 4);
+        assert_eq!(g.object_nodes, [0, 2, 2, 3]);
+        let corner = g.instances[2]
+            .transform
+            .transform_point3(DVec3::new(1.0, 1.0, 1.0));
+        assert_vec(corner, [2.0, 7.0, 98.0]);
+
+        for (attributes, lod, expected) in [
+            (
+                json!({"TRANSLATION": "@T", "SCALE": "@ONE"}),
+                false,
+                "holds 1 instances",
+            ),
+            (json!({"TRANSLATION": 99}), false, "not an accessor index"),
+            (json!({}), false, "names none of"),
+            (json!({"ROTATION": "@Z"}), false, "not a unit quaternion"),
+            (all, true, "MSFT_lod"),
+        ] {
+            let message = load_err(&build(attributes, lod));
+            assert!(
+                message.contains("node 2") && message.contains(expected),
+                "{message}"
+            );
+        }
+    }
+
     #[test]
     fn required_extensions() {
         let mut d = Doc::new();
@@ -1185,8 +1290,9 @@ mod tests {
             message.contains("KHR_draco_mesh_compression") && message.contains("gltfpack"),
             "{message}"
         );
+        // Read: a node without the extension is one object as before.
         d.json["extensionsRequired"] = json!(["EXT_mesh_gpu_instancing"]);
-        assert!(load_err(&d.glb()).contains("expand the instances"));
+        assert_eq!(load(&d.glb()).unwrap().objects.len(), 1);
         d.json["extensionsRequired"] = json!(["VENDOR_unknown"]);
         assert!(load_err(&d.glb()).contains("VENDOR_unknown"));
     }

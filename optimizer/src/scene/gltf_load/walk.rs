@@ -1,6 +1,6 @@
 //! The scene walk shared by the scene and geometry loaders: object ids in
 //! depth-first pre-order, `MSFT_lod` chains and their screen coverages,
-//! world transforms.
+//! GPU instances (`EXT_mesh_gpu_instancing`), world transforms.
 
 use super::*;
 
@@ -19,6 +19,156 @@ pub(crate) struct LodNode {
     pub(crate) mesh: usize,
     /// The object's parent world transform × this node's local transform.
     pub(crate) world: DAffine3,
+}
+
+/// The glTF extension that draws one node's mesh many times, each instance
+/// placed by its own translation, rotation and scale.
+pub(crate) const EXT_INSTANCING: &str = "EXT_mesh_gpu_instancing";
+
+/// A node's `EXT_mesh_gpu_instancing`: the accessors of its instances'
+/// `TRANSLATION`, `ROTATION` and `SCALE` (each optional, at least one
+/// given) and how many instances they hold (their common count).
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct GpuInstancing {
+    trs: [Option<usize>; 3],
+    count: usize,
+}
+
+/// The instancing of node `n`, `None` without the extension; checked from
+/// the JSON alone: attributes naming existing accessors of one count of at
+/// least 1 (their data is read by [`place_gpu_instances`]).
+pub(crate) fn gpu_instancing(
+    doc: &gltf::Document,
+    n: usize,
+    source: &str,
+) -> Result<Option<GpuInstancing>> {
+    let json = doc.as_json();
+    let Some(ext) = json.nodes[n]
+        .extensions
+        .as_ref()
+        .and_then(|e| e.others.get(EXT_INSTANCING))
+    else {
+        return Ok(None);
+    };
+    let what = format!("{source}: node {n} extensions.{EXT_INSTANCING}");
+    let Some(attributes) = ext.get("attributes").and_then(serde_json::Value::as_object) else {
+        return Err(Error::bad(what, "has no `attributes` object"));
+    };
+    let accessors = &json.accessors;
+    let mut trs = [None; 3];
+    let mut count: Option<(usize, &str)> = None;
+    for (k, name) in ["TRANSLATION", "ROTATION", "SCALE"].into_iter().enumerate() {
+        let Some(v) = attributes.get(name) else {
+            continue;
+        };
+        let a = v
+            .as_u64()
+            .and_then(|a| usize::try_from(a).ok())
+            .filter(|&a| a < accessors.len())
+            .ok_or_else(|| {
+                Error::bad(
+                    &what,
+                    format!(
+                        "attributes.{name} ({v}) is not an accessor index (the file has {} \
+                         accessors)",
+                        accessors.len()
+                    ),
+                )
+            })?;
+        let c = usize::try_from(accessors[a].count.0).unwrap_or(usize::MAX);
+        match count {
+            None => count = Some((c, name)),
+            Some((other, first)) if other != c => {
+                return Err(Error::bad(
+                    &what,
+                    format!(
+                        "attributes.{name} holds {c} instances, attributes.{first} {other}: \
+                         every attribute needs one value per instance"
+                    ),
+                ));
+            }
+            Some(_) => {}
+        }
+        trs[k] = Some(a);
+    }
+    match count {
+        None => Err(Error::bad(
+            what,
+            "names none of TRANSLATION, ROTATION and SCALE",
+        )),
+        Some((0, name)) => Err(Error::bad(
+            what,
+            format!("attributes.{name} holds no instance (count 0)"),
+        )),
+        Some((count, _)) => Ok(Some(GpuInstancing { trs, count })),
+    }
+}
+
+/// Places the GPU instances [`walk_scene`] lists: the world transform of
+/// each object that is instance `k` of a node becomes the node's world
+/// transform × the instance's own (its translation, rotation and scale, in
+/// the node's space, as the extension defines). Rotations must be unit
+/// quaternions up to rounding (they are normalised); every transform must
+/// stay finite.
+pub(crate) fn place_gpu_instances(
+    doc: &gltf::Document,
+    buffers: &[Cow<'_, [u8]>],
+    instances: &mut [Instance],
+    source: &str,
+) -> Result<()> {
+    let mut i = 0;
+    while i < instances.len() {
+        if instances[i].gpu_instance.is_none() {
+            i += 1;
+            continue;
+        }
+        let n = instances[i].node;
+        let end = i + instances[i..].iter().take_while(|x| x.node == n).count();
+        let g = gpu_instancing(doc, n, source)?
+            .ok_or_else(|| Error::Internal(format!("node {n} lost its instancing")))?;
+        let what = format!("{source}: node {n} extensions.{EXT_INSTANCING}");
+        let accessor = |k: usize| g.trs[k].and_then(|a| doc.accessors().nth(a));
+        let read3 = |k: usize, name: &str| {
+            accessor(k)
+                .map(|a| read_floats::<3>(&a, buffers, &format!("{what} {name}"), Dimensions::Vec3))
+                .transpose()
+        };
+        let translation = read3(0, "TRANSLATION")?;
+        let rotation = accessor(1)
+            .map(|a| read_floats::<4>(&a, buffers, &format!("{what} ROTATION"), Dimensions::Vec4))
+            .transpose()?;
+        let scale = read3(2, "SCALE")?;
+        for inst in &mut instances[i..end] {
+            let k = inst.gpu_instance.unwrap_or(0) as usize;
+            let at = |v: &Option<Vec<[f32; 3]>>, default: DVec3| {
+                v.as_ref()
+                    .map_or(default, |v| DVec3::from_array(v[k].map(f64::from)))
+            };
+            let t = at(&translation, DVec3::ZERO);
+            let s = at(&scale, DVec3::ONE);
+            let q = rotation.as_ref().map_or(DQuat::IDENTITY, |r| {
+                let [x, y, z, w] = r[k].map(f64::from);
+                DQuat::from_xyzw(x, y, z, w)
+            });
+            let len = q.length();
+            if !len.is_finite() || len < 1e-6 {
+                return Err(Error::bad(
+                    format!("{what} ROTATION"),
+                    format!("instance {k}: {q:?} is not a unit quaternion"),
+                ));
+            }
+            let world = inst.world * DAffine3::from_scale_rotation_translation(s, q / len, t);
+            if !world.is_finite() {
+                return Err(Error::bad(
+                    what,
+                    format!("instance {k}: the world transform is not finite"),
+                ));
+            }
+            inst.world = world;
+        }
+        i = end;
+    }
+    Ok(())
 }
 
 /// Most coarser levels one node may name (so an object has at most 32).
@@ -163,6 +313,11 @@ pub(super) fn screen_coverage(
 /// order, without recursion; returns the nodes that carry a mesh with their
 /// world transforms and their levels of detail.
 ///
+/// A node with `EXT_mesh_gpu_instancing` is one object per instance, in
+/// instance order, each with the node's world transform until
+/// [`place_gpu_instances`] adds the instance's own (the walk reads no
+/// buffer). Its instances cannot have `MSFT_lod` levels.
+///
 /// Nodes named in some node's `MSFT_lod.ids` are levels of detail, not
 /// objects: wherever they appear in the scene they and their subtrees are
 /// skipped. An object whose node has `MSFT_lod` and
@@ -176,13 +331,26 @@ pub(crate) fn walk_scene(doc: &gltf::Document, source: &str) -> Result<Vec<Insta
         return Ok(Vec::new());
     };
     // Each node is reached at most once, so the objects are at most the
-    // nodes that draw a mesh: too many is refused before the walk.
-    let drawing = doc.nodes().filter(|n| n.mesh().is_some()).count();
+    // nodes that draw a mesh and their GPU instances: too many is refused
+    // before the walk.
+    let instancing: Vec<Option<GpuInstancing>> = doc
+        .nodes()
+        .map(|n| match n.mesh() {
+            Some(_) => gpu_instancing(doc, n.index(), source),
+            None => Ok(None),
+        })
+        .collect::<Result<_>>()?;
+    let drawing = doc
+        .nodes()
+        .filter(|n| n.mesh().is_some())
+        .map(|n| instancing[n.index()].map_or(1, |g| g.count))
+        .fold(0usize, usize::saturating_add);
     if drawing > crate::scene::MAX_OBJECTS {
         return Err(Error::bad(
             source,
             format!(
-                "{drawing} nodes draw a mesh, more than the {} objects a scene may have",
+                "{drawing} nodes and GPU instances draw a mesh, more than the {} objects a \
+                 scene may have",
                 crate::scene::MAX_OBJECTS
             ),
         ));
@@ -266,12 +434,31 @@ pub(crate) fn walk_scene(doc: &gltf::Document, source: &str) -> Result<Vec<Insta
                     }),
                 },
             };
-            instances.push(Instance {
-                node: n,
-                mesh: mesh.index(),
-                world,
-                lods,
-            });
+            match instancing[n] {
+                None => instances.push(Instance {
+                    node: n,
+                    mesh: mesh.index(),
+                    world,
+                    lods,
+                    gpu_instance: None,
+                }),
+                Some(_) if lods.is_some() => {
+                    return Err(Error::bad(
+                        format!("{source}: node {n}"),
+                        format!(
+                            "has both MSFT_lod levels and {EXT_INSTANCING}; levels of detail of \
+                             GPU instances are not supported (expand the instances into nodes)"
+                        ),
+                    ));
+                }
+                Some(g) => instances.extend((0..g.count).map(|k| Instance {
+                    node: n,
+                    mesh: mesh.index(),
+                    world,
+                    lods: None,
+                    gpu_instance: Some(k as u32),
+                })),
+            }
         }
         if let Some(children) = &json_nodes[n].children {
             stack.extend(children.iter().rev().map(|c| (c.value(), n, world)));
