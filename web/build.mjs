@@ -9,7 +9,9 @@
 // The Basis Universal transcoder (three.js's copy, which its KTX2Loader
 // loads by these fixed names from a folder) decodes KTX2 impostor atlases
 // in the viewer; its folder is named by the hash of both files and the
-// bundle is told the folder (BASIS_PATH).
+// bundle is told the folder (BASIS_PATH). Draco's decoder (three.js's copy,
+// for its DRACOLoader: scenes with KHR_draco_mesh_compression) likewise
+// (OUTDIR/assets/draco-HASH/, DRACO_PATH).
 //
 //   node build.mjs OUTDIR
 //
@@ -28,13 +30,20 @@ if (!out) {
   process.exit(2);
 }
 mkdirSync(join(out, "assets"), { recursive: true });
-const basisFrom = join(here, "node_modules", "three", "examples", "jsm", "libs", "basis");
-const basisFiles = ["basis_transcoder.js", "basis_transcoder.wasm"].map((name) => [name, readFileSync(join(basisFrom, name))]);
-const basisHash = createHash("sha256");
-for (const [, data] of basisFiles) basisHash.update(data);
-const basisDir = `assets/basis-${basisHash.digest("hex").slice(0, 16)}/`;
-mkdirSync(join(out, basisDir), { recursive: true });
-for (const [name, data] of basisFiles) writeFileSync(join(out, basisDir, name), data);
+/// Copies three.js's decoder files `names` from its `libs/LIB` into
+/// `assets/LIB-HASH/` (the hash of the files); returns that folder.
+function decoderFolder(lib, names) {
+  const from = join(here, "node_modules", "three", "examples", "jsm", "libs", lib);
+  const files = names.map((name) => [name, readFileSync(join(from, name))]);
+  const hash = createHash("sha256");
+  for (const [, data] of files) hash.update(data);
+  const dir = `assets/${lib}-${hash.digest("hex").slice(0, 16)}/`;
+  mkdirSync(join(out, dir), { recursive: true });
+  for (const [name, data] of files) writeFileSync(join(out, dir, name), data);
+  return dir;
+}
+const basisDir = decoderFolder("basis", ["basis_transcoder.js", "basis_transcoder.wasm"]);
+const dracoDir = decoderFolder("draco", ["draco_wasm_wrapper.js", "draco_decoder.wasm"]);
 const result = await build({
   entryPoints: { app: join(here, "src", "main.js") },
   bundle: true,
@@ -45,7 +54,7 @@ const result = await build({
   outdir: "bundle",
   write: false,
   logLevel: "warning",
-  define: { BASIS_PATH: JSON.stringify(basisDir) },
+  define: { BASIS_PATH: JSON.stringify(basisDir), DRACO_PATH: JSON.stringify(dracoDir) },
 });
 // Named by a hash of their content alone (esbuild's [hash] also depends on
 // where the output goes), so a checkout builds the same names anywhere.

@@ -1,6 +1,7 @@
 //! The web page: `GET /` (the index) and `GET /assets/{file}` (its script
-//! and style sheet, and the Basis Universal transcoder in a folder of its
-//! own, `assets/basis-HASH/`), embedded in the binary. `build.rs` bundles `web/`
+//! and style sheet, the Basis Universal transcoder and Draco's decoder in
+//! folders of their own, `assets/basis-HASH/` and `assets/draco-HASH/`),
+//! embedded in the binary. `build.rs` bundles `web/`
 //! with esbuild into `OUT_DIR/web`; the assets are named by their content's
 //! hash, so they are cached for good while the index is checked each time.
 //! The page talks to the `/v1` API like any client.

@@ -128,18 +128,33 @@ fn the_page_and_its_assets_are_served_with_their_types_and_cache_headers() {
         assert!(text.contains(needle), "{asset} lacks {needle}");
         if asset.ends_with(".js") {
             assert!(text.contains("target_frame_time_ms"), "the job schema");
-            // The Basis Universal transcoder's folder, for KTX2 atlases.
-            let at = text.find("assets/basis-").expect("the transcoder's folder");
-            let folder = &text[at..at + "assets/basis-".len() + 16];
-            for (file, kind) in [
-                ("basis_transcoder.js", "text/javascript; charset=utf-8"),
-                ("basis_transcoder.wasm", "application/wasm"),
+            // The Basis Universal transcoder's folder, for KTX2 atlases,
+            // and Draco's decoder's, for Draco-compressed scenes.
+            for (prefix, files) in [
+                (
+                    "assets/basis-",
+                    ["basis_transcoder.js", "basis_transcoder.wasm"],
+                ),
+                (
+                    "assets/draco-",
+                    ["draco_wasm_wrapper.js", "draco_decoder.wasm"],
+                ),
             ] {
-                let (s, head, body) = get(addr, &format!("/{folder}/{file}"));
-                assert_eq!(s, 200, "{folder}/{file}");
-                assert_eq!(header(&head, "content-type"), Some(kind));
-                assert!(body.len() > 10_000, "{file}: {} bytes", body.len());
+                let at = text.find(prefix).expect("the decoder's folder");
+                let folder = &text[at..at + prefix.len() + 16];
+                for file in files {
+                    let kind = match file.rsplit_once('.').unwrap().1 {
+                        "js" => "text/javascript; charset=utf-8",
+                        _ => "application/wasm",
+                    };
+                    let (s, head, body) = get(addr, &format!("/{folder}/{file}"));
+                    assert_eq!(s, 200, "{folder}/{file}");
+                    assert_eq!(header(&head, "content-type"), Some(kind));
+                    assert!(body.len() > 10_000, "{file}: {} bytes", body.len());
+                }
             }
+            let at = text.find("assets/basis-").unwrap();
+            let folder = &text[at..at + "assets/basis-".len() + 16];
             assert_eq!(get(addr, &format!("/{folder}/../index.html")).0, 404);
             assert_eq!(
                 get(addr, &format!("/{folder}/x/basis_transcoder.js")).0,
@@ -343,8 +358,12 @@ fn footprint_view(b: &mut Browser, placement: &Value) -> (u64, u64, u64, u64) {
 }
 
 /// The viewer's object ids name the optimizer's objects: every object's
-/// drawn box is the box the optimizer loaded for that id from `glb`.
-fn assert_object_boxes(b: &mut Browser, glb: &[u8]) {
+/// drawn box is the box the optimizer loaded for that id from `glb`, within
+/// `step` of an object's largest side (the quantization step of a
+/// Draco-compressed scene: three.js bounds a primitive by its accessors'
+/// `min` and `max`, the values before quantization; the optimizer by the
+/// decoded vertices).
+fn assert_object_boxes(b: &mut Browser, glb: &[u8], step: f64) {
     let scene = optimizer::scene::gltf_load::load_scene_bytes(glb, "scene").unwrap();
     let boxes = b.eval("impostorViewer.objectMeshes.map((_, i) => impostorViewer.objectBox(i))");
     let boxes = boxes.as_array().unwrap();
@@ -355,8 +374,9 @@ fn assert_object_boxes(b: &mut Browser, glb: &[u8]) {
                 let got = b[k][a]
                     .as_f64()
                     .unwrap_or_else(|| panic!("object {i}: the viewer has no mesh for it ({b})"));
+                let side = (o.max - o.min).max_element();
                 assert!(
-                    (got - want[a]).abs() < 1e-3 * (1.0 + want[a].abs()),
+                    (got - want[a]).abs() < 1e-3 * (1.0 + want[a].abs()) + step * side,
                     "object {i} ({}) {k}[{a}]: the viewer's {got}, the optimizer's {}",
                     o.name,
                     want[a]
@@ -368,8 +388,9 @@ fn assert_object_boxes(b: &mut Browser, glb: &[u8]) {
 
 /// The tenth-scale city with its repeated meshes drawn as GPU instances
 /// (`gltfpack -noq -mi`: `EXT_mesh_gpu_instancing`), as game maps ship
-/// forests and props.
-fn instanced_city(dir: &std::path::Path) -> Vec<u8> {
+/// forests and props, then compressed with Draco (glTF Transform with
+/// Google's encoder: `KHR_draco_mesh_compression`), as the web ships scenes.
+fn instanced_draco_city(dir: &std::path::Path) -> Vec<u8> {
     let city = dir.join("city-plain.glb");
     std::fs::write(&city, common::city(0.1)).unwrap();
     let out = dir.join("city-instanced.glb");
@@ -390,7 +411,22 @@ fn instanced_city(dir: &std::path::Path) -> Vec<u8> {
         "gltfpack: {}",
         String::from_utf8_lossy(&o.stderr)
     );
-    std::fs::read(out).unwrap()
+    let compressed = dir.join("city-instanced-draco.glb");
+    let o = Command::new("node")
+        .arg(concat!(
+            env!("CARGO_MANIFEST_DIR"),
+            "/../tools/gltf-draco/draco.mjs"
+        ))
+        .arg(&out)
+        .arg(&compressed)
+        .output()
+        .expect("run node (the Draco encoder: npm ci --prefix tools/gltf-draco)");
+    assert!(
+        o.status.success(),
+        "draco: {}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    std::fs::read(compressed).unwrap()
 }
 
 /// A view in `cpv`: its region's centre looking along its VDI's centre.
@@ -566,7 +602,7 @@ fn the_page_submits_a_job_follows_it_and_views_its_impostors() {
     got.sort();
     assert_eq!(got, want);
 
-    assert_object_boxes(&mut b, &glb);
+    assert_object_boxes(&mut b, &glb, 0.0);
 
     // A walk of 100 frames along the path: at every frame the CPV shown is
     // the placement's CPV of the camera's view (found here from the
@@ -705,8 +741,10 @@ fn the_page_submits_a_job_follows_it_and_views_its_impostors() {
 /// Impostors baked as KTX2 (`memory.texture_format`, Basis Universal
 /// UASTC with mip levels) load in the viewer through three.js's KTX2Loader
 /// and the transcoder the server serves, and cover what their objects did.
-/// The scene draws its repeated meshes as GPU instances: the viewer numbers
-/// each instance as the optimizer does and hides instances one by one.
+/// The scene draws its repeated meshes as GPU instances and is
+/// Draco-compressed: the viewer (three.js with Google's Draco decoder)
+/// numbers each instance as the optimizer (its own Draco decoder) does,
+/// with the same boxes, and hides instances one by one.
 #[test]
 fn the_viewer_shows_impostors_baked_as_ktx2() {
     let Some(mut b) = Browser::start() else {
@@ -714,7 +752,7 @@ fn the_viewer_shows_impostors_baked_as_ktx2() {
     };
     let (mut child, addr, dir) = spawn("ktx2");
     let scene_path = dir.join("city.glb");
-    let scene_glb = instanced_city(&dir);
+    let scene_glb = instanced_draco_city(&dir);
     std::fs::write(&scene_path, &scene_glb).unwrap();
     let mut job = common::process::small_job();
     job["memory"] = json!({"texture_format": "ktx2"});
@@ -754,7 +792,8 @@ fn the_viewer_shows_impostors_baked_as_ktx2() {
         instances.as_u64().unwrap() > 100,
         "{instances} GPU instances"
     );
-    assert_object_boxes(&mut b, &scene_glb);
+    // Positions quantized to 14 bits over each mesh's bounds.
+    assert_object_boxes(&mut b, &scene_glb, 1.0 / f64::from(1 << 14));
     let (cpv, pixels, footprint, mismatch) = footprint_view(&mut b, &placement);
     eprintln!("KTX2: CPV {cpv}: footprint {footprint} of {pixels} pixels, mismatch {mismatch}");
     assert!(

@@ -5,7 +5,9 @@
 // the CPV's estimated frame time with and without impostors.
 //
 // Atlases may be PNG or KTX2 (Basis Universal, transcoded by three.js's
-// KTX2Loader with the transcoder the server serves).
+// KTX2Loader with the transcoder the server serves); scenes may be
+// Draco-compressed (three.js's DRACOLoader with the decoder the server
+// serves).
 //
 // State for tests and scripts: the #viewer element's data-* attributes
 // (ready, cpv, active-impostors, hidden-objects, frame-ms,
@@ -13,6 +15,7 @@
 // (lookFrom, walkFrame, state, textures, pixels, footprint, objectBox).
 import * as THREE from "three";
 import { GLTFLoader } from "three/examples/jsm/loaders/GLTFLoader.js";
+import { DRACOLoader } from "three/examples/jsm/loaders/DRACOLoader.js";
 import { KTX2Loader } from "three/examples/jsm/loaders/KTX2Loader.js";
 import { DISPLAY_TRIANGLES, decimate } from "./decimate.js";
 import { bytes, json } from "./api.js";
@@ -28,6 +31,9 @@ const HIDDEN = 1;
 /// The Basis Universal transcoder's folder (set by build.mjs), for KTX2
 /// atlases (`KHR_texture_basisu`).
 const TRANSCODER = BASIS_PATH;
+/// Draco's decoder folder (set by build.mjs), for Draco-compressed scenes
+/// (`KHR_draco_mesh_compression`).
+const DRACO_DECODER = DRACO_PATH;
 
 /// The viewer of job `id`; scenes over `triangles` triangles (default
 /// DISPLAY_TRIANGLES; 0: never) are drawn decimated.
@@ -69,7 +75,8 @@ async function load(id, renderer) {
     bytes(`/v1/jobs/${id}/impostors.glb`),
   ]);
   const ktx2 = new KTX2Loader().setTranscoderPath(TRANSCODER).detectSupport(renderer);
-  const loader = new GLTFLoader().setKTX2Loader(ktx2);
+  const draco = new DRACOLoader().setDecoderPath(DRACO_DECODER).setDecoderConfig({ type: "wasm" });
+  const loader = new GLTFLoader().setKTX2Loader(ktx2).setDRACOLoader(draco);
   let scene, impostors;
   try {
     [scene, impostors] = await Promise.all([
@@ -78,6 +85,7 @@ async function load(id, renderer) {
     ]);
   } finally {
     ktx2.dispose();
+    draco.dispose();
   }
   const sceneJson = glbJson(sceneBytes);
   const nodeObjects = await Promise.all(

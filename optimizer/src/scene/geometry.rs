@@ -28,8 +28,8 @@ use gltf::mesh::Mode;
 
 use crate::scene::gltf_load::{
     base_dir_of, check_glb_header, check_indices, checked_accessor, decode_compressed_views,
-    gltf_error, guarded, place_gpu_instances, precheck_root_with, read_floats, read_uri,
-    resolve_buffers, walk_scene,
+    decode_draco_primitives, gltf_error, guarded, place_gpu_instances, precheck_root_with,
+    read_floats, read_uri, resolve_buffers, walk_scene,
 };
 use crate::scene::material::{AlphaMode, Material, UvTransform, Wrap, uv_transform};
 use crate::{Error, Result};
@@ -161,6 +161,7 @@ fn load_inner(bytes: &[u8], source: &str, base_dir: Option<&Path>) -> Result<Sce
     let doc = gltf::Document::from_json(root).map_err(|e| gltf_error(source, e))?;
     let mut buffers = resolve_buffers(&doc, blob.as_deref(), source, base_dir)?;
     let doc = decode_compressed_views(doc, &mut buffers, source)?;
+    let doc = decode_draco_primitives(doc, &mut buffers, source)?;
     let mut scene_instances = walk_scene(&doc, source)?;
     place_gpu_instances(&doc, &buffers, &mut scene_instances, source)?;
 

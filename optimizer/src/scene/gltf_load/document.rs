@@ -109,17 +109,12 @@ pub(crate) fn precheck_root_with(
         ));
     }
     for ext in &root.extensions_required {
-        if let Some((_, hint)) = GEOMETRY_EXTENSIONS.iter().find(|(name, _)| name == ext) {
-            return Err(Error::bad(
-                format!("{source}: extensionsRequired"),
-                format!("the file requires {ext}, which is not supported; {hint}"),
-            ));
-        }
         let read_here = [
             "MSFT_lod",
             "KHR_mesh_quantization",
             EXT_MESHOPT,
             EXT_INSTANCING,
+            KHR_DRACO,
         ];
         if !APPEARANCE_EXTENSIONS.contains(&ext.as_str()) && !read_here.contains(&ext.as_str()) {
             return Err(Error::bad(
@@ -195,6 +190,34 @@ pub(crate) fn precheck_root_with(
     }
 
     let accessors = root.accessors.len();
+    // The accessors of a Draco-compressed primitive have no data of their
+    // own until `decode_draco_primitives` decodes them, which validation
+    // would refuse: they point at the compressed view meanwhile (their
+    // bytes are never read from there).
+    let views = root.buffer_views.len();
+    for mesh in &root.meshes {
+        for prim in &mesh.primitives {
+            let Some(view) = prim
+                .extensions
+                .as_ref()
+                .and_then(|e| e.others.get(KHR_DRACO))
+                .and_then(|d| d.get("bufferView"))
+                .and_then(serde_json::Value::as_u64)
+                .and_then(|v| u32::try_from(v).ok())
+                .filter(|&v| (v as usize) < views)
+            else {
+                continue;
+            };
+            for a in prim.attributes.values().chain(&prim.indices) {
+                if let Some(acc) = root.accessors.get_mut(a.value())
+                    && acc.buffer_view.is_none()
+                    && acc.sparse.is_none()
+                {
+                    acc.buffer_view = Some(gltf::json::Index::new(view));
+                }
+            }
+        }
+    }
     for (m, mesh) in root.meshes.iter().enumerate() {
         for (p, prim) in mesh.primitives.iter().enumerate() {
             if let Some(index) = prim.attributes.get(&Checked::Valid(Semantic::Positions))

@@ -14,9 +14,10 @@
 //! [`quantized`]; the node transforms that dequantize them are ordinary
 //! transforms) and `EXT_meshopt_compression` buffer views (decoded by
 //! [`meshopt`] before any accessor is read, within
-//! [`MAX_DECODED_BYTES`]). Other geometry extensions a file requires
-//! (Draco) and unknown required extensions are refused with an error naming
-//! them.
+//! [`MAX_DECODED_BYTES`]). Draco-compressed primitives
+//! (`KHR_draco_mesh_compression`) are decoded by [`draco`] into one more
+//! buffer their accessors then read. Unknown required extensions are
+//! refused with an error naming them.
 //!
 //! # GPU instancing (`EXT_mesh_gpu_instancing`)
 //!
@@ -80,6 +81,7 @@
 mod accessors;
 mod buffers;
 mod document;
+mod draco;
 mod meshopt;
 mod quantized;
 mod walk;
@@ -87,6 +89,7 @@ mod walk;
 pub(crate) use accessors::*;
 pub(crate) use buffers::*;
 pub(crate) use document::*;
+pub(crate) use draco::{KHR_DRACO, decode_draco_primitives};
 pub use meshopt::MAX_DECODED_BYTES;
 pub(crate) use meshopt::{EXT_MESHOPT, decode_compressed_views, is_fallback};
 pub(crate) use quantized::*;
@@ -112,14 +115,6 @@ pub const MAX_NODES: usize = 10_000_000;
 
 /// Largest vertex stride glTF allows (`bufferView.byteStride`).
 const MAX_STRIDE: usize = 252;
-
-/// Extensions that change how geometry is stored or instanced; a file that
-/// requires one of them cannot be read by this loader.
-const GEOMETRY_EXTENSIONS: &[(&str, &str)] = &[(
-    "KHR_draco_mesh_compression",
-    "decompress it first, e.g. `gltf-transform copy in.glb out.glb` or `gltfpack` (its \
-         quantized, meshopt-compressed output is read)",
-)];
 
 /// Extensions that only affect appearance (materials, textures, lights):
 /// placement ignores them, so a file that requires them still loads.
@@ -305,6 +300,7 @@ fn load_gltf_inner(bytes: &[u8], source: &str, base_dir: Option<&Path>) -> Resul
 
     let mut buffers = resolve_buffers(&doc, blob.as_deref(), source, base_dir)?;
     let doc = decode_compressed_views(doc, &mut buffers, source)?;
+    let doc = decode_draco_primitives(doc, &mut buffers, source)?;
     let mut instances = walk_scene(&doc, source)?;
     place_gpu_instances(&doc, &buffers, &mut instances, source)?;
 
@@ -1272,6 +1268,40 @@ mod tests {
         }
     }
 
+    /// A Draco extension object that is malformed, or whose view holds no
+    /// Draco stream, is an error naming the primitive, never a panic.
+    #[test]
+    fn bad_draco_primitives_are_named() {
+        for (ext, expected) in [
+            (
+                json!({"attributes": {"POSITION": 0}}),
+                "malformed extension object",
+            ),
+            (
+                json!({"bufferView": 0, "attributes": {"POSITION": 0}}),
+                "does not decode",
+            ),
+            (
+                json!({"bufferView": 99, "attributes": {}}),
+                "bufferView 99 does not exist",
+            ),
+        ] {
+            let mut d = Doc::new();
+            let cube = d.cube();
+            d.json["meshes"][cube]["primitives"][0]["extensions"] =
+                json!({"KHR_draco_mesh_compression": ext});
+            let n = d.node(json!({"mesh": cube}));
+            d.roots(&[n]);
+            d.json["extensionsRequired"] = json!(["KHR_draco_mesh_compression"]);
+            let message = load_err(&d.glb());
+            assert!(
+                message.contains("mesh 0 primitive 0 KHR_draco_mesh_compression")
+                    && message.contains(expected),
+                "{message}"
+            );
+        }
+    }
+
     #[test]
     fn required_extensions() {
         let mut d = Doc::new();
@@ -1284,12 +1314,10 @@ mod tests {
         // Read since quantized and meshopt-compressed files load.
         d.json["extensionsRequired"] = json!(["KHR_mesh_quantization", "EXT_meshopt_compression"]);
         assert!(load(&d.glb()).is_ok());
+        // Read: primitives without the extension load as before (Draco
+        // streams themselves: tests/packed.rs, from Google's encoder).
         d.json["extensionsRequired"] = json!(["KHR_draco_mesh_compression"]);
-        let message = load_err(&d.glb());
-        assert!(
-            message.contains("KHR_draco_mesh_compression") && message.contains("gltfpack"),
-            "{message}"
-        );
+        assert_eq!(load(&d.glb()).unwrap().objects.len(), 1);
         // Read: a node without the extension is one object as before.
         d.json["extensionsRequired"] = json!(["EXT_mesh_gpu_instancing"]);
         assert_eq!(load(&d.glb()).unwrap().objects.len(), 1);
