@@ -193,3 +193,23 @@ pub(super) fn shorten(s: &str) -> String {
         format!("{head}…")
     }
 }
+
+/// The document `root` with `decoded` (what a compression extension's
+/// data decodes to) as one more buffer, appended to `buffers` too; the
+/// views the decoder added point into it.
+pub(crate) fn with_decoded_buffer<'a>(
+    mut root: gltf::json::Root,
+    buffers: &mut Vec<Cow<'a, [u8]>>,
+    decoded: Vec<u8>,
+    source: &str,
+) -> Result<gltf::Document> {
+    root.buffers.push(gltf::json::Buffer {
+        byte_length: gltf::json::validation::USize64(decoded.len() as u64),
+        name: None,
+        uri: None,
+        extensions: None,
+        extras: Default::default(),
+    });
+    buffers.push(Cow::Owned(decoded));
+    gltf::Document::from_json(root).map_err(|e| gltf_error(source, e))
+}

@@ -161,15 +161,7 @@ pub(crate) fn decode_draco_primitives<'a>(
             }
         }
     }
-    root.buffers.push(gltf::json::Buffer {
-        byte_length: USize64(decoded.len() as u64),
-        name: None,
-        uri: None,
-        extensions: None,
-        extras: Default::default(),
-    });
-    buffers.push(Cow::Owned(decoded));
-    gltf::Document::from_json(root).map_err(|e| gltf_error(source, e))
+    with_decoded_buffer(root, buffers, decoded, source)
 }
 
 /// Decodes the Draco stream in the buffer view `c` names.

@@ -156,15 +156,7 @@ pub(crate) fn decode_compressed_views<'a>(
         view.byte_offset = Some(USize64(decoded.len() as u64));
         decoded.extend_from_slice(&bytes);
     }
-    root.buffers.push(gltf::json::Buffer {
-        byte_length: USize64(decoded.len() as u64),
-        name: None,
-        uri: None,
-        extensions: None,
-        extras: Default::default(),
-    });
-    buffers.push(Cow::Owned(decoded));
-    gltf::Document::from_json(root).map_err(|e| gltf_error(source, e))
+    with_decoded_buffer(root, buffers, decoded, source)
 }
 
 /// Decodes one view's `encoded` bytes into `count` elements of `stride`
