@@ -6,7 +6,14 @@ use crate::math::enclosing::enclosing_cone;
 use crate::math::geom::{Aabb, Vdi};
 use crate::math::grid::Grid;
 use crate::views::context::{Context, Counters};
-use crate::views::costs::{CellCuts, CpvCut, Listable, RegionCosts, cpv_cut, exceeds_target};
+use crate::views::costs::{
+    CellCuts, CpvCut, Listable, RegionCosts, cpv_cut, enclosed_cost, exceeds_target,
+};
+
+/// How far above the target (a fraction of it: 20 %) a minimum-size problem
+/// view's estimate may be for it to be refined one level deeper than
+/// `problem_views.refine_levels`.
+const NEAR_TARGET: f64 = 0.2;
 use crate::views::{Cpv, KdNode, PairCounts, ProblemViews, leaf_level};
 
 /// Builds the kd tree over the grid (pre-order).
@@ -458,11 +465,35 @@ fn process(
             // inside a cell the grid's phase matters less.
             let before = problems.len() as u64;
             let mut parts = Parts::new(&region, levels.split);
+            // A problem view whose estimate is just above the target is
+            // refined one level deeper: there refinement may still prove
+            // it, where one far above is a real problem (the deeper level
+            // would cost four times the cones for nothing).
+            let deeper = |vdi: &Vdi, cones: &mut u64| {
+                if levels.refine == 0 {
+                    return levels;
+                }
+                *cones += 1;
+                let cone = enclosing_cone(&region, vdi, &ctx.lens);
+                let t = ctx
+                    .model
+                    .frame_time(enclosed_cost(ctx, &costs, &cone, &region, None));
+                let refine = if t <= ctx.t_max * (1.0 + NEAR_TARGET) {
+                    levels.refine + 1
+                } else {
+                    levels.refine
+                };
+                Levels { refine, ..levels }
+            };
             if levels.refine > 0 && levels.split > 0 {
-                problems.retain(|vdi| parts.add(ctx, &costs, &region, vdi, levels, &mut cones));
+                problems.retain(|vdi| {
+                    let l = deeper(vdi, &mut cones);
+                    parts.add(ctx, &costs, &region, vdi, l, &mut cones)
+                });
             } else {
                 problems.retain(|vdi| {
-                    !proven_by_refinement(ctx, &costs, &region, vdi, levels.refine, &mut cones)
+                    let l = deeper(vdi, &mut cones);
+                    !proven_by_refinement(ctx, &costs, &region, vdi, l.refine, &mut cones)
                 });
             }
             let refined = before - problems.len() as u64;

@@ -279,8 +279,10 @@ pub struct ProblemViewParams {
     /// How many levels below `min_vdi_deg` a problem view's directions are
     /// refined before it is kept: each level splits its VDI in four. A
     /// problem view all of whose parts meet the target is proven and
-    /// dropped; one that is kept keeps its own (coarse) estimate. 0 turns
-    /// refinement off. Default 3, at most 4.
+    /// dropped; one that is kept keeps its own (coarse) estimate. A problem
+    /// view whose estimate is at most 20 % above the target is refined one
+    /// level more (where it may still be proven; one far above is a real
+    /// problem). 0 turns refinement off. Default 3, at most 4.
     #[serde(default = "default_refine_levels")]
     pub refine_levels: u8,
     /// How many times a problem cell is halved (along its sides at least
