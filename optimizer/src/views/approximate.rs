@@ -10,11 +10,12 @@ use crate::views::costs::{
     CellCuts, CpvCut, Listable, RegionCosts, cpv_cut, enclosed_cost, exceeds_target,
 };
 
+use crate::views::{Cpv, KdNode, PairCounts, ProblemViews, leaf_level};
+
 /// How far above the target (a fraction of it: 20 %) a minimum-size problem
 /// view's estimate may be for it to be refined one level deeper than
 /// `problem_views.refine_levels`.
 const NEAR_TARGET: f64 = 0.2;
-use crate::views::{Cpv, KdNode, PairCounts, ProblemViews, leaf_level};
 
 /// Builds the kd tree over the grid (pre-order).
 fn build_kd(grid: &Grid) -> Vec<KdNode> {
