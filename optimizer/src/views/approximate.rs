@@ -9,7 +9,6 @@ use crate::views::context::{Context, Counters};
 use crate::views::costs::{
     CellCuts, CpvCut, Listable, RegionCosts, cpv_cut, enclosed_cost, exceeds_target,
 };
-
 use crate::views::{Cpv, KdNode, PairCounts, ProblemViews, leaf_level};
 
 /// How far above the target (a fraction of it: 20 %) a minimum-size problem
