@@ -9,6 +9,9 @@
 //       job's camera, which the export chose its geometric errors for);
 //       resolves once the root tileset is parsed (or failed to load)
 //   tilesClient.placeCamera(position, lookAt)
+//   tilesClient.setErrorTarget(px)
+//       the screen-space error above which a tile refines (the
+//       renderer's `errorTarget`, 16 px by default, as CesiumJS's)
 //   await tilesClient.settle()
 //       updates and renders until no tile is queued, downloading or parsing
 //       and three updates in a row leave every tile's state unchanged
@@ -173,6 +176,12 @@ window.tilesClient = {
       await sleep(10);
     }
     return { loaded: tiles.rootLoadingState === LOADED, errors: [...errors] };
+  },
+
+  setErrorTarget(px) {
+    if (!tiles) throw new Error("tilesClient.setErrorTarget: no tileset is loaded");
+    tiles.errorTarget = px;
+    return tiles.errorTarget;
   },
 
   placeCamera(position, lookAt) {
