@@ -383,11 +383,14 @@ impl Parts {
 }
 
 /// The quadtree level of minimum-size VDIs, how many levels below it
-/// problem views are refined, and how many times a problem cell is halved.
+/// problem views are refined, how far above the target (a fraction of it)
+/// a problem view is refined one level more, and how many times a problem
+/// cell is halved.
 #[derive(Clone, Copy)]
 struct Levels {
     leaf: u8,
     refine: u8,
+    near_target: f64,
     split: u8,
 }
 
@@ -478,7 +481,7 @@ fn process(
                 let t = ctx
                     .model
                     .frame_time(enclosed_cost(ctx, &costs, &cone, &region, None));
-                let refine = if t <= ctx.t_max * (1.0 + NEAR_TARGET) {
+                let refine = if t <= ctx.t_max * (1.0 + levels.near_target) {
                     levels.refine + 1
                 } else {
                     levels.refine
@@ -565,6 +568,17 @@ fn process(
 /// `counters`; stops early (with what it found so far) once the run is
 /// cancelled.
 pub fn approximate(ctx: &Context, job: &Job, counters: &Counters) -> ProblemViews {
+    approximate_near(ctx, job, counters, NEAR_TARGET)
+}
+
+/// [`approximate`] with problem views at most `near_target` (a fraction of
+/// the target) above the target refined one level deeper.
+pub(super) fn approximate_near(
+    ctx: &Context,
+    job: &Job,
+    counters: &Counters,
+    near_target: f64,
+) -> ProblemViews {
     let grid = job.grid();
     let kd = build_kd(&grid);
     let level = leaf_level(job.problem_views.min_vdi_deg);
@@ -584,6 +598,7 @@ pub fn approximate(ctx: &Context, job: &Job, counters: &Counters) -> ProblemView
     let levels = Levels {
         leaf: level,
         refine: job.problem_views.refine_levels,
+        near_target,
         split: job.problem_views.split_levels,
     };
     let res = process(ctx, counters, &kd, 0, &all, levels);

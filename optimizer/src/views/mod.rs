@@ -20,6 +20,8 @@ mod costs;
 mod precision;
 
 pub use approximate::approximate;
+#[cfg(test)]
+use approximate::approximate_near;
 pub use context::{Context, Counters};
 pub use costs::{
     CellCuts, CpvCut, Listable, RegionCosts, cpv_clusters, cpv_cut, enclosed_cost, enclosing_time,
@@ -370,6 +372,62 @@ mod tests {
             "every coarse CPV is real: nothing to refine"
         );
         assert!(p_fine >= p_coarse, "{p_fine} < {p_coarse}");
+    }
+
+    /// A problem view whose estimate is at most `near_target` above the
+    /// target is refined one level deeper than `refine_levels`, and only
+    /// such a one: each minimum-size problem view is kept exactly where the
+    /// same job without the rule keeps it at the view's own level
+    /// (`refine_levels` + 1 near the target, `refine_levels` otherwise),
+    /// and the deeper level proves near views the shallower one keeps (so
+    /// the comparison could fail).
+    #[test]
+    fn problem_views_near_the_target_are_refined_one_level_deeper() {
+        let scene = crate::testutil::synthetic_city(5, 6, 6);
+        let mut job = crate::testutil::synthetic_job(6, 6);
+        job.problem_views.split_levels = 0;
+        job.problem_views.refine_levels = 0;
+        let h = Hierarchy::build(&scene);
+        let ctx = Context::new(&scene, &h, None, &job, Control::default());
+        let all = approximate(&ctx, &job, &Counters::new());
+        let kept = |refine: u8, near: f64| -> std::collections::HashSet<(u32, Vdi)> {
+            let mut j = job.clone();
+            j.problem_views.refine_levels = refine;
+            approximate_near(&ctx, &j, &Counters::new(), near)
+                .cpvs
+                .iter()
+                .map(|c| (c.kd, c.vdi))
+                .collect()
+        };
+        let near = 0.2;
+        let rule = kept(1, near);
+        let shallow = kept(1, 0.0);
+        let deep = kept(2, 0.0);
+        let (mut near_views, mut far_views, mut proven_deeper) = (0, 0, 0);
+        for c in &all.cpvs {
+            let key = (c.kd, c.vdi);
+            let is_near = c.time <= job.target_frame_time_ms * (1.0 + near);
+            let expected = if is_near {
+                deep.contains(&key)
+            } else {
+                shallow.contains(&key)
+            };
+            assert_eq!(
+                rule.contains(&key),
+                expected,
+                "{key:?}: estimate {} ms, target {} ms",
+                c.time,
+                job.target_frame_time_ms
+            );
+            near_views += usize::from(is_near);
+            far_views += usize::from(!is_near);
+            proven_deeper += usize::from(is_near && shallow.contains(&key) && !deep.contains(&key));
+        }
+        assert!(
+            near_views > 0 && far_views > 0,
+            "{near_views} near, {far_views} far"
+        );
+        assert!(proven_deeper > 0, "the deeper level proved nothing more");
     }
 
     /// Halving problem cells only drops problem views and shrinks regions
