@@ -72,6 +72,10 @@ pub struct Stats {
     pub score_bounds: u64,
     /// Impostors removed by pruning.
     pub pruned: u64,
+    /// Impostors dropped because every CPV using them stays above the
+    /// target (`memory.keep_partial`).
+    #[serde(default)]
+    pub partial_dropped: u64,
     /// Impostors placed.
     pub impostors: u64,
     /// Impostor memory, bytes.

@@ -94,7 +94,22 @@ pub fn select_lazy(
     cands: &Candidates,
     progress: &mut dyn FnMut(u64) -> bool,
 ) -> Selection {
-    select_lazy_with(ctx, job, pv, cands, progress, None)
+    select_lazy_with(ctx, job, pv, cands, progress, None, &[])
+}
+
+/// [`select_lazy`] with the CPVs `given_up` (one bit per CPV) given up: no
+/// gain in them counts, so no impostor is chosen for them, though they use
+/// every chosen impostor that makes them faster. Their reasons are left
+/// `None` (the caller knows why it gave them up).
+pub fn select_lazy_giving_up(
+    ctx: &Context,
+    job: &Job,
+    pv: &ProblemViews,
+    cands: &Candidates,
+    given_up: &[u64],
+    progress: &mut dyn FnMut(u64) -> bool,
+) -> Selection {
+    select_lazy_with(ctx, job, pv, cands, progress, None, given_up)
 }
 
 /// [`select_lazy`] removing outdated heap keys first when the heap holds
@@ -108,8 +123,9 @@ pub(crate) fn select_lazy_with(
     cands: &Candidates,
     progress: &mut dyn FnMut(u64) -> bool,
     first_compaction: Option<usize>,
+    given_up: &[u64],
 ) -> Selection {
-    let mut st = State::new(ctx, pv, cands, job.memory.budget_bytes);
+    let mut st = State::giving_up(ctx, pv, cands, job.memory.budget_bytes, given_up);
     if !progress(st.unsolved()) {
         return st.sel;
     }

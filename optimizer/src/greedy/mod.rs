@@ -39,13 +39,15 @@ use crate::views::{Context, Cpv, ProblemViews};
 mod explain;
 mod lazy;
 mod marks;
+mod partial;
 #[cfg(test)]
 use lazy::blocks;
 #[cfg(test)]
 pub(crate) use lazy::select_lazy_with;
-pub use lazy::{LAZY_BATCH, select_lazy};
+pub use lazy::{LAZY_BATCH, select_lazy, select_lazy_giving_up};
 pub use marks::marks_bytes;
 use marks::{Adjustments, Mark, NodeMarks, cell_word_mask};
+pub use partial::{drop_partial, reselect_solvable};
 
 /// The selection: which candidates are impostors and where they are used.
 #[derive(Clone, Debug)]
@@ -64,6 +66,9 @@ pub struct Selection {
     pub bounds: u64,
     /// Impostors removed by the pruning pass.
     pub pruned: u64,
+    /// Impostors dropped because every CPV using them stays above `t_max`
+    /// (see [`drop_partial`]).
+    pub partial_dropped: u64,
     /// Per CPV: why it is still above `t_max` (`None` when solved; empty
     /// when every CPV is solved). See [`State::explain_unsolved`].
     pub reasons: Vec<Option<UnsolvedReason>>,
@@ -80,6 +85,7 @@ impl Selection {
             evaluations: 0,
             bounds: 0,
             pruned: 0,
+            partial_dropped: 0,
             reasons: Vec::new(),
         }
     }
@@ -167,6 +173,10 @@ struct State<'a> {
     spent: u64,
     /// Per candidate: accepted at least once (its memory is in `spent`).
     chosen: Vec<bool>,
+    /// One bit per CPV: given up (no gain in it counts; it is never
+    /// unsolved here, though an impostor that makes it faster is still
+    /// used in it). Empty: none.
+    given_up: Vec<u64>,
     sel: Selection,
 }
 
@@ -186,6 +196,20 @@ impl<'a> State<'a> {
         cands: &'a Candidates,
         budget: Option<u64>,
     ) -> Self {
+        Self::giving_up(ctx, pv, cands, budget, &[])
+    }
+
+    /// [`State::new`] with the CPVs `given_up` (one bit per CPV, or empty)
+    /// given up.
+    fn giving_up(
+        ctx: &'a Context<'a>,
+        pv: &'a ProblemViews,
+        cands: &'a Candidates,
+        budget: Option<u64>,
+        given_up: &[u64],
+    ) -> Self {
+        let gave_up = |c: usize| given_up.get(c / 64).is_some_and(|w| w >> (c % 64) & 1 == 1);
+        let target = |c: usize| if gave_up(c) { f64::INFINITY } else { ctx.t_max };
         let mut st = State {
             ctx,
             pv,
@@ -195,13 +219,18 @@ impl<'a> State<'a> {
             marks: NodeMarks::new(pv.cpvs.len(), ctx.hierarchy.nodes.len()),
             unsolved_in_cell: {
                 let mut v = vec![0u32; pv.kd.len()];
-                for c in &pv.cpvs {
-                    v[c.kd as usize] += u32::from(c.time > ctx.t_max);
+                for (i, c) in pv.cpvs.iter().enumerate() {
+                    v[c.kd as usize] += u32::from(c.time > target(i));
                 }
                 v
             },
             cell_changed: vec![0; pv.kd.len()],
-            excess: pv.cpvs.iter().map(|c| c.time - ctx.t_max).collect(),
+            excess: pv
+                .cpvs
+                .iter()
+                .enumerate()
+                .map(|(i, c)| c.time - target(i))
+                .collect(),
             cell_cpvs: {
                 let mut v = vec![IdRange::default(); pv.kd.len()];
                 for r in pv.cells() {
@@ -216,12 +245,13 @@ impl<'a> State<'a> {
             unsolved: {
                 let mut v = vec![0u64; pv.cpvs.len().div_ceil(64)];
                 for (i, c) in pv.cpvs.iter().enumerate() {
-                    if c.time > ctx.t_max {
+                    if c.time > target(i) {
                         v[i / 64] |= 1 << (i % 64);
                     }
                 }
                 v
             },
+            given_up: given_up.to_vec(),
             sel: Selection::empty(&pv.cpvs, cands.list.len()),
         };
         for kd in 0..st.cell_cpvs.len() {
@@ -280,6 +310,20 @@ impl<'a> State<'a> {
     /// True when CPV `c` is still above `t_max`.
     fn is_unsolved(&self, c: u32) -> bool {
         self.unsolved[c as usize / 64] >> (c % 64) & 1 == 1
+    }
+
+    /// The time CPV `c` is to be brought within: `t_max`, or infinity
+    /// where it is given up.
+    fn target(&self, c: u32) -> f64 {
+        let given_up = self
+            .given_up
+            .get(c as usize / 64)
+            .is_some_and(|w| w >> (c % 64) & 1 == 1);
+        if given_up {
+            f64::INFINITY
+        } else {
+            self.ctx.t_max
+        }
     }
 
     /// CPVs still above `t_max`.
@@ -594,7 +638,7 @@ impl<'a> State<'a> {
             }
             imps.push(i);
             self.sel.uses[i as usize] += 1;
-            let excess = self.ctx.model.frame_time(cost) - self.ctx.t_max;
+            let excess = self.ctx.model.frame_time(cost) - self.target(c);
             if self.excess[cu] > 0.0 && excess <= 0.0 {
                 self.unsolved_in_cell[cpv.kd as usize] -= 1;
                 self.unsolved[cu / 64] &= !(1 << (cu % 64));
@@ -655,8 +699,16 @@ pub fn select_naive(ctx: &Context, job: &Job, pv: &ProblemViews, cands: &Candida
 /// Removes impostors that are not needed to keep every CPV within `t_max`,
 /// largest memory first (ties: lower id). Removing an impostor from a CPV
 /// draws its cluster's objects as geometry there again; a removal is kept
-/// only if every CPV using the impostor stays within `t_max`.
-pub fn prune(ctx: &Context, pv: &ProblemViews, cands: &Candidates, sel: &mut Selection) {
+/// only if every CPV using the impostor stays within `t_max`, or, with
+/// `ignore_unsolved`, every such CPV that was within it (the others stay
+/// above it either way).
+pub fn prune(
+    ctx: &Context,
+    pv: &ProblemViews,
+    cands: &Candidates,
+    sel: &mut Selection,
+    ignore_unsolved: bool,
+) {
     let mut st = State::new(ctx, pv, cands, None);
     st.sel = sel.clone();
     let mut order = st.sel.impostors();
@@ -681,8 +733,10 @@ pub fn prune(ctx: &Context, pv: &ProblemViews, cands: &Candidates, sel: &mut Sel
                 ok = false;
                 break;
             };
-            let cost = st.sel.cpv_cost[c as usize] - st.impostor_cost(i, cpv) + orig;
-            if ctx.model.frame_time(cost) > ctx.t_max {
+            let before = st.sel.cpv_cost[c as usize];
+            let cost = before - st.impostor_cost(i, cpv) + orig;
+            let was_over = ignore_unsolved && ctx.model.frame_time(before) > ctx.t_max;
+            if !was_over && ctx.model.frame_time(cost) > ctx.t_max {
                 ok = false;
                 break;
             }

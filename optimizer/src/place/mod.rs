@@ -203,7 +203,7 @@ impl Prepared<'_> {
         st.begin("greedy", 0.2, &what);
         let total = pv.cpvs.len();
         let mut first_unsolved = None;
-        let mut sel = greedy::select_lazy(ctx, job, pv, &cands, &mut |unsolved| {
+        let mut report = |unsolved: u64| {
             let start = *first_unsolved.get_or_insert(unsolved.max(1));
             ctl.progress(
                 "greedy",
@@ -211,13 +211,30 @@ impl Prepared<'_> {
                 &format!("{what}: {unsolved} of {total} CPVs above the target"),
             );
             !ctl.cancelled()
-        });
+        };
+        let mut sel = greedy::select_lazy(ctx, job, pv, &cands, &mut report);
+        // Without a budget, memory goes only where it brings CPVs within
+        // the target: the CPVs the greedy could not solve are given up and
+        // the selection made again without their partial gains.
+        let solvable_only = !job.memory.keeps_partial() && method != Method::Exact;
+        if solvable_only && !ctl.cancelled() {
+            sel = greedy::reselect_solvable(ctx, job, pv, &cands, sel, &mut report);
+        }
         st.end("greedy");
         ctl.check()?;
         if opts.prune || method == Method::ShaftsPrune {
             st.begin("prune", 0.96, "pruning");
-            greedy::prune(ctx, pv, &cands, &mut sel);
+            greedy::prune(ctx, pv, &cands, &mut sel, !job.memory.keeps_partial());
             st.end("prune");
+        }
+        if solvable_only {
+            st.begin(
+                "partial",
+                0.96,
+                "dropping impostors that solve no CPV they are used in",
+            );
+            greedy::drop_partial(ctx, pv, &cands, &mut sel);
+            st.end("partial");
         }
         let mut exact = None;
         if method == Method::Exact {
@@ -249,6 +266,7 @@ impl Prepared<'_> {
             evaluations_per_choice: sel.evaluations as f64 / sel.accepted.max(1) as f64,
             predicted_peak_bytes: predicted,
             pruned: sel.pruned,
+            partial_dropped: sel.partial_dropped,
             exact,
             ..self.run_stats(ctx, counters, pv, &placement, std::mem::take(&mut st.times))
         };
@@ -718,7 +736,7 @@ mod tests {
             // Removing outdated heap keys from the first refresh on does
             // not change the selection.
             let compacted =
-                greedy::select_lazy_with(&ctx, &job, &pv, &cands, &mut |_| true, Some(0));
+                greedy::select_lazy_with(&ctx, &job, &pv, &cands, &mut |_| true, Some(0), &[]);
             assert_eq!(compacted.uses, lazy.uses, "seed {seed}");
             assert_eq!(compacted.cpv_impostors, lazy.cpv_impostors);
             // Under a memory budget that binds, both skip the same
@@ -823,6 +841,59 @@ mod tests {
             .unwrap();
             assert_eq!(eval.violations_in_solved, 0, "1/{part}: {eval:?}");
         }
+    }
+
+    /// Without a budget, memory goes only where it brings CPVs within the
+    /// target: every impostor is used by a CPV within it, with less memory
+    /// than the placement keeping partial gains (`keep_partial`), in which
+    /// some impostors serve unsolved CPVs alone (so the test could fail);
+    /// the CPVs within the target hold in sampled views, and each CPV left
+    /// above it says why.
+    #[test]
+    fn impostors_that_solve_nothing_are_not_kept() {
+        let scene = synthetic_city(2, 5, 5);
+        let mut job = synthetic_job(5, 5);
+        // A target most CPVs cannot be brought within.
+        job.target_frame_time_ms = 3.0;
+        job.memory.keep_partial = Some(true);
+        let kept = place(&scene, &job);
+        job.memory.keep_partial = None;
+        let lean = place(&scene, &job);
+        let partial_only = |p: &Placement| {
+            let mut solves = vec![false; p.impostors.len()];
+            for c in p.cpvs.iter().filter(|c| c.solved) {
+                for &i in &c.impostors {
+                    solves[i as usize] = true;
+                }
+            }
+            solves.iter().filter(|&&s| !s).count()
+        };
+        let (k, l) = (&kept.summary, &lean.summary);
+        assert!(k.unsolved_cpvs * 2 > k.cpvs, "{k:?}");
+        assert!(partial_only(&kept) > 0, "{k:?}");
+        assert_eq!(partial_only(&lean), 0, "{l:?}");
+        assert!(l.memory_bytes < k.memory_bytes, "{l:?}\n{k:?}");
+        // Giving up the CPVs the greedy could not solve solves about as
+        // many.
+        assert!(
+            l.unsolved_cpvs <= k.unsolved_cpvs + l.cpvs / 100,
+            "{l:?}\n{k:?}"
+        );
+        for c in &lean.cpvs {
+            assert_eq!(c.solved, c.unsolved_reason.is_none(), "CPV {}", c.id);
+        }
+        let eval = evaluate(
+            &scene,
+            &job,
+            &lean,
+            &EvalOptions {
+                views: 2000,
+                seed: 5,
+                ..EvalOptions::default()
+            },
+        )
+        .unwrap();
+        assert_eq!(eval.violations_in_solved, 0, "{eval:?}");
     }
 
     #[test]

@@ -390,6 +390,28 @@ pub struct MemoryParams {
     /// are reported unsolved (`budget_exhausted`) with their residual times.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub budget_bytes: Option<u64>,
+    /// Whether impostors that help only CPVs left above the target are
+    /// kept. Such an impostor makes those views faster without bringing any
+    /// of them within the target; where most problem views cannot be
+    /// solved (display resolutions, where an impostor's texels and fill
+    /// grow with the pixels and the geometry's cost does not) they take
+    /// most of the memory. Not kept, the greedy is made again with the
+    /// CPVs it left above the target given up (where they are more than
+    /// 1 % of the CPVs), then every impostor that solves no CPV it is used
+    /// in is dropped: the unsolved CPVs draw that geometry again and report
+    /// the higher residual times; an impostor also used by a CPV within the
+    /// target is always kept. Default: kept with `budget_bytes` (the budget
+    /// is spent on frame time), not kept without.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub keep_partial: Option<bool>,
+}
+
+impl MemoryParams {
+    /// Whether impostors that help only unsolved CPVs are kept
+    /// (`keep_partial`, by default whether a budget is given).
+    pub fn keeps_partial(&self) -> bool {
+        self.keep_partial.unwrap_or(self.budget_bytes.is_some())
+    }
 }
 
 fn default_t_max() -> f64 {
@@ -549,6 +571,7 @@ impl Default for MemoryParams {
             texels_per_pixel: default_texels_per_pixel(),
             texture_format: None,
             budget_bytes: None,
+            keep_partial: None,
         }
     }
 }
