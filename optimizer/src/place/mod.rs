@@ -881,7 +881,39 @@ mod tests {
         );
         for c in &lean.cpvs {
             assert_eq!(c.solved, c.unsolved_reason.is_none(), "CPV {}", c.id);
+            assert_no_object_twice(&lean, c, "lean");
         }
+        // The same placement on one thread and on three.
+        for threads in [1, 3] {
+            let pool = rayon::ThreadPoolBuilder::new()
+                .num_threads(threads)
+                .build()
+                .unwrap();
+            let again = pool.install(|| place(&scene, &job));
+            assert_eq!(
+                serde_json::to_string(&again).unwrap(),
+                serde_json::to_string(&lean).unwrap(),
+                "{threads} threads"
+            );
+        }
+        // The second greedy is what saves most: dropping what solves
+        // nothing from the first alone keeps more memory.
+        let h = Hierarchy::build(&scene);
+        let ctx = Context::new(&scene, &h, None, &job, Control::default());
+        let pv = views::approximate(&ctx, &job, &Counters::new());
+        let cands = candidates::generate(&ctx, &job, &pv);
+        let first = greedy::select_lazy(&ctx, &job, &pv, &cands, &mut |_| true);
+        let mut dropped = first.clone();
+        greedy::drop_partial(&ctx, &pv, &cands, &mut dropped);
+        let mut again = greedy::reselect_solvable(&ctx, &job, &pv, &cands, first, &mut |_| true);
+        greedy::drop_partial(&ctx, &pv, &cands, &mut again);
+        assert_eq!(again.memory_bytes(&cands.list), l.memory_bytes);
+        assert!(
+            again.memory_bytes(&cands.list) < dropped.memory_bytes(&cands.list),
+            "{} >= {}",
+            again.memory_bytes(&cands.list),
+            dropped.memory_bytes(&cands.list)
+        );
         let eval = evaluate(
             &scene,
             &job,
