@@ -218,6 +218,21 @@ impl Prepared<'_> {
         // the selection made again without their partial gains.
         let solvable_only = !job.memory.keeps_partial() && method != Method::Exact;
         if solvable_only && !ctl.cancelled() {
+            let given_up = sel.reasons.iter().filter(|r| r.is_some()).count() as u64;
+            let left = total as u64 - given_up;
+            let mut start = None;
+            let mut report = |unsolved: u64| {
+                let start = *start.get_or_insert(unsolved.max(1));
+                ctl.progress(
+                    "greedy",
+                    0.2 + 0.75 * (1.0 - unsolved as f64 / start as f64),
+                    &format!(
+                        "{what} again, {given_up} CPVs no impostor brings within the target \
+                         given up: {unsolved} of {left} CPVs above the target"
+                    ),
+                );
+                !ctl.cancelled()
+            };
             sel = greedy::reselect_solvable(ctx, job, pv, &cands, sel, &mut report);
         }
         st.end("greedy");
