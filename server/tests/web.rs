@@ -394,39 +394,40 @@ fn instanced_draco_city(dir: &std::path::Path) -> Vec<u8> {
     let city = dir.join("city-plain.glb");
     std::fs::write(&city, common::city(0.1)).unwrap();
     let out = dir.join("city-instanced.glb");
-    let cli = concat!(
-        env!("CARGO_MANIFEST_DIR"),
-        "/../tools/gltfpack/node_modules/gltfpack/cli.js"
-    );
-    let o = Command::new("node")
-        .arg(cli)
-        .args(["-noq", "-mi", "-i"])
-        .arg(&city)
-        .arg("-o")
-        .arg(&out)
-        .output()
-        .expect("run node (gltfpack: npm ci --prefix tools/gltfpack)");
-    assert!(
-        o.status.success(),
-        "gltfpack: {}",
-        String::from_utf8_lossy(&o.stderr)
+    let tools = concat!(env!("CARGO_MANIFEST_DIR"), "/../tools");
+    node(
+        "gltfpack (npm ci --prefix tools/gltfpack)",
+        &format!("{tools}/gltfpack/node_modules/gltfpack/cli.js"),
+        &[
+            "-noq".as_ref(),
+            "-mi".as_ref(),
+            "-i".as_ref(),
+            city.as_os_str(),
+            "-o".as_ref(),
+            out.as_os_str(),
+        ],
     );
     let compressed = dir.join("city-instanced-draco.glb");
-    let o = Command::new("node")
-        .arg(concat!(
-            env!("CARGO_MANIFEST_DIR"),
-            "/../tools/gltf-draco/draco.mjs"
-        ))
-        .arg(&out)
-        .arg(&compressed)
-        .output()
-        .expect("run node (the Draco encoder: npm ci --prefix tools/gltf-draco)");
-    assert!(
-        o.status.success(),
-        "draco: {}",
-        String::from_utf8_lossy(&o.stderr)
+    node(
+        "the Draco encoder (npm ci --prefix tools/gltf-draco)",
+        &format!("{tools}/gltf-draco/draco.mjs"),
+        &[out.as_os_str(), compressed.as_os_str()],
     );
     std::fs::read(compressed).unwrap()
+}
+
+/// Runs `node SCRIPT ARGS`, failing the test with its error output.
+fn node(what: &str, script: &str, args: &[&std::ffi::OsStr]) {
+    let o = Command::new("node")
+        .arg(script)
+        .args(args)
+        .output()
+        .unwrap_or_else(|e| panic!("run node for {what}: {e}"));
+    assert!(
+        o.status.success(),
+        "{what}: {}",
+        String::from_utf8_lossy(&o.stderr)
+    );
 }
 
 /// A view in `cpv`: its region's centre looking along its VDI's centre.
