@@ -90,6 +90,15 @@ pub fn run(a: PlaceArgs) -> Result<ExitCode> {
             if reasons.is_empty() { "" } else { ": " },
             reasons.join(", ")
         );
+        if output.stats.candidates > 0
+            && output.stats.exact.is_none()
+            && !job.memory.keeps_partial()
+        {
+            eprintln!(
+                "no impostor is kept for unsolved CPVs alone (they draw that geometry; \
+                 `memory.keep_partial: true` or a budget spends memory on making them faster)"
+            );
+        }
     }
     if let Some(b) = sum.budget_bytes {
         eprintln!(
