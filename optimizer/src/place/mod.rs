@@ -203,11 +203,15 @@ impl Prepared<'_> {
         st.begin("greedy", 0.2, &what);
         let total = pv.cpvs.len();
         let mut first_unsolved = None;
+        // The fraction last reported: a second greedy (below) goes on from
+        // it, so progress never goes back.
+        let mut reached = 0.2f64;
         let mut report = |unsolved: u64| {
             let start = *first_unsolved.get_or_insert(unsolved.max(1));
+            reached = 0.2 + 0.75 * (1.0 - unsolved as f64 / start as f64);
             ctl.progress(
                 "greedy",
-                0.2 + 0.75 * (1.0 - unsolved as f64 / start as f64),
+                reached,
                 &format!("{what}: {unsolved} of {total} CPVs above the target"),
             );
             !ctl.cancelled()
@@ -221,11 +225,12 @@ impl Prepared<'_> {
             let given_up = sel.reasons.iter().filter(|r| r.is_some()).count() as u64;
             let left = total as u64 - given_up;
             let mut start = None;
+            let from = reached;
             let mut report = |unsolved: u64| {
                 let start = *start.get_or_insert(unsolved.max(1));
                 ctl.progress(
                     "greedy",
-                    0.2 + 0.75 * (1.0 - unsolved as f64 / start as f64),
+                    from + (0.95 - from) * (1.0 - unsolved as f64 / start as f64),
                     &format!(
                         "{what} again, {given_up} CPVs no impostor brings within the target \
                          given up: {unsolved} of {left} CPVs above the target"
