@@ -180,6 +180,27 @@ struct State<'a> {
     sel: Selection,
 }
 
+/// The time CPV `c` is to be brought within: `t_max`, or infinity where
+/// its bit in `given_up` (one per CPV, or none) is set.
+fn target_of(ctx: &Context, given_up: &[u64], c: usize) -> f64 {
+    if given_up.get(c / 64).is_some_and(|w| w >> (c % 64) & 1 == 1) {
+        f64::INFINITY
+    } else {
+        ctx.t_max
+    }
+}
+
+/// Cost of candidate `cand`'s impostor in CPV `cpv` (at the region's
+/// closest point to its cluster).
+fn impostor_cost(ctx: &Context, cand: &Candidate, cpv: &Cpv) -> Cost {
+    let s = ctx.hierarchy.nodes[cand.node as usize].sphere;
+    ctx.model.impostor(
+        cand.spec.layers,
+        s.radius,
+        cpv.region.distance_to_point(s.center),
+    )
+}
+
 /// The effect of impostor `i` on one CPV.
 struct Effect {
     accelerates: bool,
@@ -208,8 +229,7 @@ impl<'a> State<'a> {
         budget: Option<u64>,
         given_up: &[u64],
     ) -> Self {
-        let gave_up = |c: usize| given_up.get(c / 64).is_some_and(|w| w >> (c % 64) & 1 == 1);
-        let target = |c: usize| if gave_up(c) { f64::INFINITY } else { ctx.t_max };
+        let target = |c: usize| target_of(ctx, given_up, c);
         let mut st = State {
             ctx,
             pv,
@@ -315,15 +335,7 @@ impl<'a> State<'a> {
     /// The time CPV `c` is to be brought within: `t_max`, or infinity
     /// where it is given up.
     fn target(&self, c: u32) -> f64 {
-        let given_up = self
-            .given_up
-            .get(c as usize / 64)
-            .is_some_and(|w| w >> (c % 64) & 1 == 1);
-        if given_up {
-            f64::INFINITY
-        } else {
-            self.ctx.t_max
-        }
+        target_of(self.ctx, &self.given_up, c as usize)
     }
 
     /// CPVs still above `t_max`.
@@ -333,13 +345,7 @@ impl<'a> State<'a> {
 
     /// Cost of impostor `j` in CPV `cpv`.
     fn impostor_cost(&self, j: u32, cpv: &Cpv) -> Cost {
-        let cand = &self.cands[j as usize];
-        let s = self.ctx.hierarchy.nodes[cand.node as usize].sphere;
-        self.ctx.model.impostor(
-            cand.spec.layers,
-            s.radius,
-            cpv.region.distance_to_point(s.center),
-        )
+        impostor_cost(self.ctx, &self.cands[j as usize], cpv)
     }
 
     /// The cost of cluster `node`'s current representation in CPV `c`,

@@ -34,7 +34,6 @@ pub fn drop_partial(
             }
         }
     }
-    let h = ctx.hierarchy;
     let mut dropped = 0;
     for (c, list) in sel.cpv_impostors.iter_mut().enumerate() {
         if solved[c] {
@@ -43,22 +42,16 @@ pub fn drop_partial(
         let cpv = &pv.cpvs[c];
         let mut cost = sel.cpv_cost[c];
         list.retain(|&i| {
-            let cand = &cands.list[i as usize];
-            // A pair without a stored cost cannot be restored: the impostor
-            // stays there (no pair of a placed impostor lacks one).
             if keep[i as usize] {
                 return true;
             }
+            let cand = &cands.list[i as usize];
+            // A pair without a stored cost cannot be restored: the impostor
+            // stays there (no pair of a placed impostor lacks one).
             let Some(orig) = cands.pairs.cost_of(cand.node, c as u32) else {
                 return true;
             };
-            let s = h.nodes[cand.node as usize].sphere;
-            let imp = ctx.model.impostor(
-                cand.spec.layers,
-                s.radius,
-                cpv.region.distance_to_point(s.center),
-            );
-            cost = cost - imp + orig;
+            cost = cost - super::impostor_cost(ctx, cand, cpv) + orig;
             let uses = &mut sel.uses[i as usize];
             *uses -= 1;
             if *uses == 0 {
