@@ -928,6 +928,35 @@ mod tests {
         let mut again = greedy::reselect_solvable(&ctx, &job, &pv, &cands, first, &mut |_| true);
         greedy::drop_partial(&ctx, &pv, &cands, &mut again);
         assert_eq!(again.memory_bytes(&cands.list), l.memory_bytes);
+        // Every unsolved CPV's cost is its original cost with each impostor
+        // it still uses in place of its cluster's objects: those dropped
+        // were drawn as geometry again.
+        let mut unsolved = 0;
+        for (c, list) in again.cpv_impostors.iter().enumerate() {
+            let cost = again.cpv_cost[c];
+            if ctx.model.frame_time(cost) <= ctx.t_max {
+                continue;
+            }
+            unsolved += 1;
+            let cpv = &pv.cpvs[c];
+            let mut expected = cpv.cost;
+            for &i in list {
+                let cand = &cands.list[i as usize];
+                let s = h.nodes[cand.node as usize].sphere;
+                let imp = ctx.model.impostor(
+                    cand.spec.layers,
+                    s.radius,
+                    cpv.region.distance_to_point(s.center),
+                );
+                expected = expected + imp - cands.pairs.cost_of(cand.node, c as u32).unwrap();
+            }
+            let (want, got) = (ctx.model.frame_time(expected), ctx.model.frame_time(cost));
+            assert!(
+                (want - got).abs() < 1e-9,
+                "CPV {c}: {got} ms, its impostors give {want}"
+            );
+        }
+        assert!(unsolved > 0);
         assert!(
             again.memory_bytes(&cands.list) < dropped.memory_bytes(&cands.list),
             "{} >= {}",
