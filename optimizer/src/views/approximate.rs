@@ -7,7 +7,7 @@ use crate::math::geom::{Aabb, Vdi};
 use crate::math::grid::Grid;
 use crate::views::context::{Context, Counters};
 use crate::views::costs::{
-    CellCuts, CpvCut, Listable, RegionCosts, cpv_cut, enclosed_cost, exceeds_target,
+    CellCuts, CpvCut, Listable, RegionCosts, cpv_cut, exceeds, exceeds_target,
 };
 use crate::views::{Cpv, KdNode, PairCounts, ProblemViews, leaf_level};
 
@@ -478,10 +478,8 @@ fn process(
                 }
                 *cones += 1;
                 let cone = enclosing_cone(&region, vdi, &ctx.lens);
-                let t = ctx
-                    .model
-                    .frame_time(enclosed_cost(ctx, &costs, &cone, &region, None));
-                let refine = if t <= ctx.t_max * (1.0 + levels.near_target) {
+                let near = ctx.t_max * (1.0 + levels.near_target);
+                let refine = if !exceeds(ctx, &costs, &cone, near) {
                     levels.refine + 1
                 } else {
                     levels.refine
