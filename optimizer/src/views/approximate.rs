@@ -144,8 +144,45 @@ fn proven_by_refinement(
     vdi: &Vdi,
     levels: u8,
     cones: &mut u64,
+    hint: &mut Hint,
 ) -> bool {
-    levels > 0 && !unproven_directions(ctx, costs, region, vdi, levels, cones, None)
+    levels > 0 && !first_unproven(ctx, costs, region, vdi, levels, cones, hint)
+}
+
+/// Per quadtree level, the child (0..4) through which the last search of
+/// [`first_unproven`] found an unproven direction: tried first next time
+/// (neighbouring problem views are often unproven the same way).
+type Hint = [u8; 32];
+
+/// [`unproven_directions`] stopping at the first unproven finest direction,
+/// trying first at each level the child `hint` names, which it updates.
+fn first_unproven(
+    ctx: &Context,
+    costs: &RegionCosts,
+    region: &Aabb,
+    vdi: &Vdi,
+    levels: u8,
+    cones: &mut u64,
+    hint: &mut Hint,
+) -> bool {
+    let children = vdi.children();
+    let level = usize::from(children[0].level).min(hint.len() - 1);
+    let first = usize::from(hint[level]);
+    for k in (0..4).map(|k| (k + first) % 4) {
+        let child = &children[k];
+        if !ctx.pitch_overlaps(child) {
+            continue;
+        }
+        *cones += 1;
+        if !exceeds_target(ctx, costs, &enclosing_cone(region, child, &ctx.lens)) {
+            continue;
+        }
+        if levels == 1 || first_unproven(ctx, costs, region, child, levels - 1, cones, hint) {
+            hint[level] = k as u8;
+            return true;
+        }
+    }
+    false
 }
 
 /// The halves of `b` along each axis at least half as long as its longest
@@ -240,6 +277,7 @@ struct Parts {
     corners: Vec<Aabb>,
     directions: Vec<Vdi>,
     proven: Vec<Aabb>,
+    hint: Hint,
 }
 
 impl Parts {
@@ -254,6 +292,7 @@ impl Parts {
             corners,
             directions: Vec::new(),
             proven: Vec::new(),
+            hint: [0; 32],
         }
     }
 
@@ -320,7 +359,15 @@ impl Parts {
         let depth = levels.split;
         if self.covers(region) {
             // Only whether refinement proves the VDI matters now.
-            return !proven_by_refinement(ctx, costs, region, vdi, levels.refine, cones);
+            return !proven_by_refinement(
+                ctx,
+                costs,
+                region,
+                vdi,
+                levels.refine,
+                cones,
+                &mut self.hint,
+            );
         }
         self.directions.clear();
         if !unproven_directions(
@@ -492,9 +539,12 @@ fn process(
                     parts.add(ctx, &costs, &region, vdi, l, &mut cones)
                 });
             } else {
+                let mut hint = [0; 32];
                 problems.retain(|vdi| {
                     let l = deeper(vdi, &mut cones);
-                    !proven_by_refinement(ctx, &costs, &region, vdi, l.refine, &mut cones)
+                    !proven_by_refinement(
+                        ctx, &costs, &region, vdi, l.refine, &mut cones, &mut hint,
+                    )
                 });
             }
             let refined = before - problems.len() as u64;
