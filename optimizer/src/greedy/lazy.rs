@@ -1,7 +1,7 @@
 //! The lazy greedy: a heap of blocks ranked by bounds and scores.
 
-use dary_heap::QuaternaryHeap as BinaryHeap;
 use std::cmp::Ordering;
+use std::collections::BinaryHeap;
 
 use rayon::prelude::*;
 
