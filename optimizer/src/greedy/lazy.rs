@@ -12,15 +12,17 @@ use crate::math::IdRange;
 use crate::views::{Context, ProblemViews};
 
 /// A heap entry: a candidate's key, the sequence number of the refresh
-/// that made it (older than the candidate's newest: outdated), the choice
-/// count when it was computed, and whether it is the exact score or an
-/// upper bound of it.
+/// that made it (older than its block's newest: outdated), the choice
+/// count when it was computed, whether it is the exact score or an upper
+/// bound of it, and its block's number (blocks numbered in candidate
+/// order).
 #[derive(Clone, Copy, Debug)]
 struct Entry {
     key: Key,
     seq: u64,
     stamp: u64,
     exact: bool,
+    block: u32,
 }
 
 impl PartialEq for Entry {
@@ -132,10 +134,14 @@ pub(crate) fn select_lazy_with(
     // The heap ranks blocks by their best candidate's key: the greedy
     // choice is the best candidate of the best block. Keys start as
     // bounds (cheap: no pair is walked).
-    let blocks = blocks(&cands.list);
-    let firsts: Vec<u32> = (0..cands.list.len() as u32)
-        .filter(|&i| blocks[i as usize].start == i)
-        .collect();
+    // Each block's candidates, by block number.
+    let blocks: Vec<IdRange> = {
+        let per_candidate = blocks(&cands.list);
+        (0..cands.list.len() as u32)
+            .filter(|&i| per_candidate[i as usize].start == i)
+            .map(|i| per_candidate[i as usize])
+            .collect()
+    };
     // The best candidate of block `b` that fits in the memory budget
     // (one that does not never will: the budget's spending only grows).
     let best = |st: &State, b: u32, scores: &[f64]| {
@@ -149,11 +155,11 @@ pub(crate) fn select_lazy_with(
             .filter(|k| k.score > 0.0 && st.fits(k.id))
             .max()
     };
-    let initial: Vec<Option<Key>> = firsts
+    let initial: Vec<Option<Key>> = blocks
         .par_iter()
-        .map(|&b| {
-            let scores = st.bound_block(blocks[b as usize]);
-            (scores.len() as u64, best(&st, b, &scores))
+        .map(|&block| {
+            let scores = st.bound_block(block);
+            (scores.len() as u64, best(&st, block.start, &scores))
         })
         .collect::<Vec<_>>()
         .into_iter()
@@ -162,27 +168,29 @@ pub(crate) fn select_lazy_with(
             k
         })
         .collect();
-    // Per block (at its first candidate), the sequence number of its
-    // newest key.
-    let mut latest = vec![0u64; cands.list.len()];
+    // Per block, the sequence number of its newest key.
+    let mut latest = vec![0u64; blocks.len()];
     let mut heap: BinaryHeap<Entry> = initial
         .into_iter()
-        .flatten()
-        .map(|key| Entry {
-            key,
-            seq: 0,
-            stamp: 0,
-            exact: false,
+        .enumerate()
+        .filter_map(|(b, key)| {
+            Some(Entry {
+                key: key?,
+                seq: 0,
+                stamp: 0,
+                exact: false,
+                block: b as u32,
+            })
         })
         .collect();
     let mut seq = 0u64;
     let mut compact_at = first_compaction.unwrap_or(2 * heap.len().max(1024));
     let batch = LAZY_BATCH;
     let mut version = 0u64;
-    let block_of = |e: &Entry| blocks[e.key.id as usize].start as usize;
-    // (block start, the key): a current key becomes exact scores, any
-    // other a current bound.
-    let mut stale: Vec<(u32, Entry)> = Vec::with_capacity(batch);
+    let block_of = |e: &Entry| e.block as usize;
+    // The keys to refresh: a current key becomes exact scores, any other
+    // a current bound.
+    let mut stale: Vec<Entry> = Vec::with_capacity(batch);
     while let Some(&top) = heap.peek() {
         if top.seq < latest[block_of(&top)] {
             heap.pop();
@@ -216,7 +224,7 @@ pub(crate) fn select_lazy_with(
                     heap.pop();
                 }
                 Some(e) if !(e.exact && current(e) && st.fits(e.key.id)) => {
-                    stale.push((block_of(e) as u32, *e));
+                    stale.push(*e);
                     heap.pop();
                 }
                 _ => break,
@@ -226,8 +234,8 @@ pub(crate) fn select_lazy_with(
         // cells the candidate serves.
         let fresh: Vec<(bool, Vec<f64>)> = stale
             .par_iter()
-            .map(|(b, e)| {
-                let block = blocks[*b as usize];
+            .map(|e| {
+                let block = blocks[block_of(e)];
                 if current(e) {
                     (true, st.score_block(block))
                 } else {
@@ -235,20 +243,21 @@ pub(crate) fn select_lazy_with(
                 }
             })
             .collect();
-        for (&(b, _), (exact, scores)) in stale.iter().zip(fresh) {
+        for (e, (exact, scores)) in stale.iter().zip(fresh) {
             if exact {
                 st.sel.evaluations += scores.len() as u64;
             } else {
                 st.sel.bounds += scores.len() as u64;
             }
             seq += 1;
-            latest[b as usize] = seq;
-            if let Some(key) = best(&st, b, &scores) {
+            latest[block_of(e)] = seq;
+            if let Some(key) = best(&st, blocks[block_of(e)].start, &scores) {
                 heap.push(Entry {
                     key,
                     seq,
                     stamp: version,
                     exact,
+                    block: e.block,
                 });
             }
         }
