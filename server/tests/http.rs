@@ -570,7 +570,6 @@ async fn jobs_over_the_per_job_limits_fail_naming_them() {
     cfg.job_max_seconds = Some(1);
     let addr = start(cfg).await;
     let job = reference_job();
-    let begin = Instant::now();
     let id = submit_city(addr, 1.0, job).await;
     let v = wait_final(addr, &id, Duration::from_secs(60)).await;
     assert_eq!(v["state"], "failed", "{v}");
@@ -578,11 +577,11 @@ async fn jobs_over_the_per_job_limits_fail_naming_them() {
         v["error"], "stopped after 1 s, the server's --job-max-seconds limit",
         "{v}"
     );
-    assert!(
-        begin.elapsed() < Duration::from_secs(5),
-        "stopped after {:?}",
-        begin.elapsed()
-    );
+    // Stopped soon after the limit, by the worker's own clock (the time
+    // from the submission, which builds the full city in this process
+    // beside the other tests, says nothing about the limit).
+    let ran = v["finished_ms"].as_i64().unwrap() - v["started_ms"].as_i64().unwrap();
+    assert!((1000..4000).contains(&ran), "ran {ran} ms: {v}");
     let (s, _) = get_json(addr, &format!("/v1/jobs/{id}/placement")).await;
     assert_eq!(s, 409);
 
