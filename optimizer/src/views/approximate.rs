@@ -221,8 +221,8 @@ fn leaves(region: &Aabb, depth: u8) -> Vec<Aabb> {
 /// Whether refinement leaves some finest part of `vdi` (refined `levels`
 /// times, parts outside the pitch range skipped) unproven from `region`: a
 /// part whose enclosing time, and each of whose coarser ancestors' below
-/// `vdi`, exceeds the target. Without `out` it stops at the first; with it,
-/// it lists them all there.
+/// `vdi`, exceeds the target. Lists them all in `out` ([`first_unproven`]
+/// stops at the first).
 fn unproven_directions(
     ctx: &Context,
     costs: &RegionCosts,
@@ -230,7 +230,7 @@ fn unproven_directions(
     vdi: &Vdi,
     levels: u8,
     cones: &mut u64,
-    mut out: Option<&mut Vec<Vdi>>,
+    out: &mut Vec<Vdi>,
 ) -> bool {
     let mut any = false;
     for child in vdi.children() {
@@ -241,26 +241,12 @@ fn unproven_directions(
         if !exceeds_target(ctx, costs, &enclosing_cone(region, &child, &ctx.lens)) {
             continue;
         }
-        let found = if levels > 1 {
-            unproven_directions(
-                ctx,
-                costs,
-                region,
-                &child,
-                levels - 1,
-                cones,
-                out.as_deref_mut(),
-            )
+        any |= if levels > 1 {
+            unproven_directions(ctx, costs, region, &child, levels - 1, cones, out)
         } else {
-            if let Some(o) = out.as_deref_mut() {
-                o.push(child);
-            }
+            out.push(child);
             true
         };
-        any |= found;
-        if any && out.is_none() {
-            return true;
-        }
     }
     any
 }
@@ -377,7 +363,7 @@ impl Parts {
             vdi,
             levels.refine,
             cones,
-            Some(&mut self.directions),
+            &mut self.directions,
         ) {
             // Refinement proves it from the whole cell.
             return false;
