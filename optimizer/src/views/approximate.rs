@@ -688,6 +688,84 @@ mod tests {
         assert!(leaves.iter().all(|n| n.hi[0] - n.lo[0] == 1));
     }
 
+    /// The search that stops at the first unproven sub-direction answers as
+    /// the full listing does, whichever child its hint tries first, fresh
+    /// or carried from one problem view to the next: a proof never depends
+    /// on the order in which sub-directions are tried. Both answers occur
+    /// (so the comparison could fail).
+    #[test]
+    fn first_unproven_agrees_with_the_listing_for_every_hint() {
+        use crate::control::Control;
+        use crate::scene::hierarchy::Hierarchy;
+        let scene = crate::testutil::synthetic_city(5, 6, 6);
+        let job = crate::testutil::synthetic_job(6, 6);
+        let h = Hierarchy::build(&scene);
+        let ctx = Context::new(&scene, &h, None, &job, Control::default());
+        let kd = build_kd(&job.grid());
+        let level = leaf_level(job.problem_views.min_vdi_deg);
+        let n = 1u32 << level;
+        let (mut proven, mut unproven) = (0, 0);
+        for node in kd.iter().filter(|k| k.children.is_none()).step_by(3) {
+            let costs = RegionCosts::of_kd(&ctx, node, &Counters::new());
+            let region = node.aabb;
+            let mut carried: Hint = [0; 32];
+            for face in 0..6u8 {
+                for (iu, iv) in (0..n).flat_map(|iu| (0..n).map(move |iv| (iu, iv))) {
+                    let vdi = Vdi {
+                        face,
+                        level,
+                        iu,
+                        iv,
+                    };
+                    let cone = enclosing_cone(&region, &vdi, &ctx.lens);
+                    if !ctx.pitch_overlaps(&vdi) || !exceeds_target(&ctx, &costs, &cone) {
+                        continue;
+                    }
+                    for levels in 1..=2u8 {
+                        let cones = &mut 0;
+                        let mut listed = Vec::new();
+                        let any = unproven_directions(
+                            &ctx,
+                            &costs,
+                            &region,
+                            &vdi,
+                            levels,
+                            cones,
+                            &mut listed,
+                        );
+                        assert_eq!(any, !listed.is_empty());
+                        for start in 0..4u8 {
+                            let mut hint = [start; 32];
+                            let first = first_unproven(
+                                &ctx, &costs, &region, &vdi, levels, cones, &mut hint,
+                            );
+                            assert_eq!(first, any, "{vdi:?}, {levels} levels, hint {start}");
+                        }
+                        let first = first_unproven(
+                            &ctx,
+                            &costs,
+                            &region,
+                            &vdi,
+                            levels,
+                            cones,
+                            &mut carried,
+                        );
+                        assert_eq!(first, any, "{vdi:?}, {levels} levels, carried hint");
+                        if any {
+                            unproven += 1;
+                        } else {
+                            proven += 1;
+                        }
+                    }
+                }
+            }
+        }
+        assert!(
+            proven > 0 && unproven > 0,
+            "{proven} proven, {unproven} not"
+        );
+    }
+
     /// Every VDI down to the leaf level has a bit of its own, and a set
     /// holds exactly its leaves and their ancestors.
     #[test]

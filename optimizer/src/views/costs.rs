@@ -398,3 +398,60 @@ pub fn enclosing_time(ctx: &Context, region: &Aabb, vdi: &Vdi) -> f64 {
     ctx.model
         .frame_time(enclosed_cost(ctx, &costs, &cone, region, None))
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::control::Control;
+    use crate::math::geom::Vdi;
+    use crate::scene::hierarchy::Hierarchy;
+    use crate::views::leaf_level;
+
+    /// The early-exit walk answers as the full sum does, for thresholds
+    /// on both sides of each set's time and as close to it as a part in a
+    /// million: neither exit (the sum past the threshold, or the sum and
+    /// everything still queued under it) may stop on a wrong answer,
+    /// whatever order the hierarchy is visited in.
+    #[test]
+    fn exceeds_answers_as_the_full_sum() {
+        let scene = crate::testutil::synthetic_city(5, 6, 6);
+        let job = crate::testutil::synthetic_job(6, 6);
+        let h = Hierarchy::build(&scene);
+        let ctx = Context::new(&scene, &h, None, &job, Control::default());
+        let grid = job.grid();
+        let level = leaf_level(job.problem_views.min_vdi_deg);
+        let n = 1u32 << level;
+        let (mut above, mut below, mut sets) = (0, 0, 0);
+        for (i, j) in [(0, 0), (2, 1), (5, 3), (3, 5)] {
+            let region = grid.cell_box([i, 0, j], [i + 1, 1, j + 1]);
+            let costs = RegionCosts::new(&ctx, &region, None, &Counters::new());
+            for face in 0..6u8 {
+                for (iu, iv) in (0..n).flat_map(|iu| (0..n).map(move |iv| (iu, iv))) {
+                    let vdi = Vdi {
+                        face,
+                        level,
+                        iu,
+                        iv,
+                    };
+                    let cone = enclosing_cone(&region, &vdi, &ctx.lens);
+                    let t = ctx
+                        .model
+                        .frame_time(enclosed_cost(&ctx, &costs, &cone, &region, None));
+                    sets += 1;
+                    for f in [0.5, 0.9, 1.0 - 1e-6, 1.0 + 1e-6, 1.1, 2.0] {
+                        let threshold = t * f;
+                        let full = t > threshold;
+                        assert_eq!(
+                            exceeds(&ctx, &costs, &cone, threshold),
+                            full,
+                            "{vdi:?} from {region:?}: {t} ms against {threshold}"
+                        );
+                        above += usize::from(full);
+                        below += usize::from(!full);
+                    }
+                }
+            }
+        }
+        assert!(sets > 100 && above > 0 && below > 0);
+    }
+}
