@@ -577,11 +577,14 @@ async fn jobs_over_the_per_job_limits_fail_naming_them() {
         v["error"], "stopped after 1 s, the server's --job-max-seconds limit",
         "{v}"
     );
-    // Stopped soon after the limit, by the worker's own clock (the time
-    // from the submission, which builds the full city in this process
-    // beside the other tests, says nothing about the limit).
+    // Stopped after the limit, by the worker's own clock (the time from the
+    // submission, which builds the full city in this process beside the
+    // other tests, says nothing about the limit). Loading the scene is not
+    // stopped part-way (the run checks once it is loaded), and beside this
+    // file's other jobs on two cores it took up to 4.8 s on CI; on an idle
+    // machine the job stops 1.01-1.09 s after it started.
     let ran = v["finished_ms"].as_i64().unwrap() - v["started_ms"].as_i64().unwrap();
-    assert!((1000..4000).contains(&ran), "ran {ran} ms: {v}");
+    assert!((1000..10_000).contains(&ran), "ran {ran} ms: {v}");
     let (s, _) = get_json(addr, &format!("/v1/jobs/{id}/placement")).await;
     assert_eq!(s, 409);
 

@@ -475,6 +475,11 @@ fn process(
     let mut cones = 0u64;
     let mut stack: Vec<Vdi> = (0..6u8).rev().map(Vdi::face).collect();
     while let Some(vdi) = stack.pop() {
+        // A region near the kd tree's root sees most of the scene in every
+        // direction: its walks take a while, so a cancel is heard here too.
+        if ctx.cancelled() {
+            return RegionResult::empty(cones, 1, 0);
+        }
         if !open.contains(&vdi) || !ctx.pitch_overlaps(&vdi) {
             continue;
         }
