@@ -252,6 +252,23 @@ impl Vdi {
         [c(0, 0), c(1, 0), c(0, 1), c(1, 1)]
     }
 
+    /// Every VDI of quadtree level `level`, face by face, row by row.
+    pub fn all_at(level: u8) -> Vec<Vdi> {
+        let n = 1u32 << level;
+        (0..6u8)
+            .flat_map(|face| {
+                (0..n).flat_map(move |iv| {
+                    (0..n).map(move |iu| Vdi {
+                        face,
+                        level,
+                        iu,
+                        iv,
+                    })
+                })
+            })
+            .collect()
+    }
+
     /// True when `leaf` (at a deeper or equal level) lies inside this VDI.
     pub fn contains(&self, leaf: &Vdi) -> bool {
         if leaf.face != self.face || leaf.level < self.level {

@@ -621,19 +621,7 @@ pub(super) fn approximate_near(
     let grid = job.grid();
     let kd = build_kd(&grid);
     let level = leaf_level(job.problem_views.min_vdi_deg);
-    let n = 1u32 << level;
-    let all: Vec<Vdi> = (0..6u8)
-        .flat_map(|face| {
-            (0..n).flat_map(move |iv| {
-                (0..n).map(move |iu| Vdi {
-                    face,
-                    level,
-                    iu,
-                    iv,
-                })
-            })
-        })
-        .collect();
+    let all = Vdi::all_at(level);
     let levels = Levels {
         leaf: level,
         refine: job.problem_views.refine_levels,
@@ -708,59 +696,42 @@ mod tests {
         let ctx = Context::new(&scene, &h, None, &job, Control::default());
         let kd = build_kd(&job.grid());
         let level = leaf_level(job.problem_views.min_vdi_deg);
-        let n = 1u32 << level;
         let (mut proven, mut unproven) = (0, 0);
         for node in kd.iter().filter(|k| k.children.is_none()).step_by(3) {
             let costs = RegionCosts::of_kd(&ctx, node, &Counters::new());
             let region = node.aabb;
             let mut carried: Hint = [0; 32];
-            for face in 0..6u8 {
-                for (iu, iv) in (0..n).flat_map(|iu| (0..n).map(move |iv| (iu, iv))) {
-                    let vdi = Vdi {
-                        face,
-                        level,
-                        iu,
-                        iv,
-                    };
-                    let cone = enclosing_cone(&region, &vdi, &ctx.lens);
-                    if !ctx.pitch_overlaps(&vdi) || !exceeds_target(&ctx, &costs, &cone) {
-                        continue;
+            for vdi in Vdi::all_at(level) {
+                let cone = enclosing_cone(&region, &vdi, &ctx.lens);
+                if !ctx.pitch_overlaps(&vdi) || !exceeds_target(&ctx, &costs, &cone) {
+                    continue;
+                }
+                for levels in 1..=2u8 {
+                    let cones = &mut 0;
+                    let mut listed = Vec::new();
+                    let any = unproven_directions(
+                        &ctx,
+                        &costs,
+                        &region,
+                        &vdi,
+                        levels,
+                        cones,
+                        &mut listed,
+                    );
+                    assert_eq!(any, !listed.is_empty());
+                    for start in 0..4u8 {
+                        let mut hint = [start; 32];
+                        let first =
+                            first_unproven(&ctx, &costs, &region, &vdi, levels, cones, &mut hint);
+                        assert_eq!(first, any, "{vdi:?}, {levels} levels, hint {start}");
                     }
-                    for levels in 1..=2u8 {
-                        let cones = &mut 0;
-                        let mut listed = Vec::new();
-                        let any = unproven_directions(
-                            &ctx,
-                            &costs,
-                            &region,
-                            &vdi,
-                            levels,
-                            cones,
-                            &mut listed,
-                        );
-                        assert_eq!(any, !listed.is_empty());
-                        for start in 0..4u8 {
-                            let mut hint = [start; 32];
-                            let first = first_unproven(
-                                &ctx, &costs, &region, &vdi, levels, cones, &mut hint,
-                            );
-                            assert_eq!(first, any, "{vdi:?}, {levels} levels, hint {start}");
-                        }
-                        let first = first_unproven(
-                            &ctx,
-                            &costs,
-                            &region,
-                            &vdi,
-                            levels,
-                            cones,
-                            &mut carried,
-                        );
-                        assert_eq!(first, any, "{vdi:?}, {levels} levels, carried hint");
-                        if any {
-                            unproven += 1;
-                        } else {
-                            proven += 1;
-                        }
+                    let first =
+                        first_unproven(&ctx, &costs, &region, &vdi, levels, cones, &mut carried);
+                    assert_eq!(first, any, "{vdi:?}, {levels} levels, carried hint");
+                    if any {
+                        unproven += 1;
+                    } else {
+                        proven += 1;
                     }
                 }
             }
