@@ -70,6 +70,21 @@ pub fn run(a: PlaceArgs) -> Result<ExitCode> {
         write_json(Some(s), &output.stats)?;
     }
     let sum = &output.placement.summary;
+    if let Some(t) = &output.stats.tiled_for_memory {
+        eprintln!(
+            "placed in {} × {} tiles: the whole job needed about {:.2} GB, more than the {:.2} GB {} \
+             (set \"partition\" in the job to choose the tiles)",
+            t.tiles[0],
+            t.tiles[1],
+            t.predicted_bytes as f64 / 1e9,
+            t.limit_bytes as f64 / 1e9,
+            if a.max_memory_gb.is_some() {
+                "--max-memory-gb allows"
+            } else {
+                "available"
+            }
+        );
+    }
     eprintln!(
         "{} CPVs, {} candidates, {} impostors, {:.3} MB, {} unsolved",
         sum.cpvs,

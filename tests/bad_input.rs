@@ -229,7 +229,7 @@ fn impossible_view_cells_are_rejected() {
 }
 
 #[test]
-fn jobs_predicted_beyond_the_memory_limit_are_refused() {
+fn jobs_predicted_beyond_the_memory_limit_are_tiled_or_refused() {
     let dir = tmp("memory-limit");
     let scene = city("0.1");
     let job = root().join("fixtures/jobs/city-small.json");
@@ -259,11 +259,41 @@ fn jobs_predicted_beyond_the_memory_limit_are_refused() {
         &["--max-memory-gb", "24", "--stats", s(&stats)],
     );
     assert_eq!(code(&o), 0, "{}", stderr(&o));
-    let predicted = read_json(&stats)["predicted_peak_bytes"].as_u64().unwrap();
+    let whole = read_json(&stats);
+    let predicted = whole["predicted_peak_bytes"].as_u64().unwrap();
     assert!(
         predicted > 1_000_000 && predicted < 24_000_000_000,
         "{predicted}"
     );
+    assert!(whole.get("tiled_for_memory").is_none(), "{whole}");
+    let cpvs = read_json(&out)["summary"]["cpvs"].as_u64().unwrap();
+    // A limit between what the run holds after its problem views and its
+    // prediction: the job is placed in tiles, each holding a share of the
+    // pairs, whose CPVs are the whole job's.
+    let held = whole["seconds"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|t| t["stage"] == "problem_views")
+        .and_then(|t| t["rss_bytes"].as_u64())
+        .expect("the problem views' resident memory");
+    let limit = (held + predicted) / 2;
+    let gb = format!("{}", limit as f64 / 1e9);
+    let o = place(
+        &scene,
+        &job,
+        &out,
+        &["--max-memory-gb", &gb, "--stats", s(&stats)],
+    );
+    assert_eq!(code(&o), 0, "{}", stderr(&o));
+    assert!(stderr(&o).contains("tiles"), "{}", stderr(&o));
+    let tiled = read_json(&stats);
+    let t = &tiled["tiled_for_memory"];
+    let n = t["tiles"][0].as_u64().unwrap() * t["tiles"][1].as_u64().unwrap();
+    assert!(n >= 2, "{t}");
+    assert!(t["predicted_bytes"].as_u64().unwrap() > limit, "{t}");
+    assert!(tiled["tiles"].as_array().unwrap().len() as u64 >= n, "{tiled}");
+    assert_eq!(read_json(&out)["summary"]["cpvs"].as_u64(), Some(cpvs));
     // Nonsense limits are argument errors.
     for bad in ["0", "-1", "NaN", "lots"] {
         let o = place(&scene, &job, &out, &["--max-memory-gb", bad]);

@@ -331,7 +331,7 @@ fn run(st: &AppState, owner: &str, id: i64, bake: bool, kind: Run) {
             }
         }
     }
-    release_memory();
+    optimizer::place::release_memory();
 }
 
 /// The merge of tiled job `id` once its tiles are final: fails naming the
@@ -368,20 +368,6 @@ pub(crate) fn shutdown(st: &AppState) {
     st.0.stopping.store(true, Ordering::SeqCst);
     st.0.live.stop_all(Stopped::Shutdown);
     st.0.wakeup.notify();
-}
-
-/// Gives the heap a finished job freed back to the system: glibc keeps
-/// freed memory in its arenas, so after a job of several gigabytes an idle
-/// server would stay that large. The one `unsafe` of the workspace: a libc
-/// call with no preconditions.
-#[allow(unsafe_code)]
-fn release_memory() {
-    #[cfg(all(target_os = "linux", target_env = "gnu"))]
-    // SAFETY: malloc_trim only returns free heap pages to the system; it
-    // has no preconditions and touches no memory in use.
-    unsafe {
-        libc::malloc_trim(0);
-    }
 }
 
 /// The state a run ends in, its error and its summary: a job cancelled by
@@ -460,7 +446,7 @@ mod tests {
         // Keep the last block so the heap's top is in use.
         let last = blocks.into_iter().last();
         let freed = rss_bytes();
-        release_memory();
+        optimizer::place::release_memory();
         let released = rss_bytes();
         drop(last);
         assert!(full > 500 << 20, "{full}");

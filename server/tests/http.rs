@@ -599,7 +599,7 @@ async fn jobs_over_the_per_job_limits_fail_naming_them() {
     assert_eq!(v["state"], "failed", "{v}");
     let error = v["error"].as_str().unwrap();
     assert!(
-        error.contains("more than the 0.0 GB the server's --job-max-memory allows"),
+        error.contains("more than the 0.00 GB the server's --job-max-memory allows"),
         "{error}"
     );
 }

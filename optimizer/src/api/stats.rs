@@ -107,6 +107,26 @@ pub struct Stats {
     /// placement's, each shared impostor once).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub tiles: Vec<TileStats>,
+    /// Set when the job, without a `partition`, was placed in tiles because
+    /// its prediction exceeded the memory limit (`tiles` then lists them).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub tiled_for_memory: Option<TiledForMemory>,
+}
+
+/// Why and how a job was placed in tiles it did not ask for.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize, JsonSchema)]
+pub struct TiledForMemory {
+    /// `[nx, nz]` tiles (a tile still above the limit was split again by
+    /// its own run, within its entry of `tiles`).
+    pub tiles: [u32; 2],
+    /// The whole job's predicted peak memory, bytes.
+    pub predicted_bytes: u64,
+    /// The memory limit it exceeded, bytes (`--max-memory-gb`, the
+    /// server's per-job limit, or the memory available).
+    pub limit_bytes: u64,
+    /// Seconds spent on the whole job's problem views before the split
+    /// (the tiles compute their own; included in no stage of `seconds`).
+    pub problem_views_seconds: f64,
 }
 
 /// The `exact` method's integer program and how far the greedy is from it.

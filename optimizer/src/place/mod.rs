@@ -8,7 +8,7 @@ use std::time::Instant;
 
 use crate::api::job::{Job, Method};
 use crate::api::placement::Placement;
-use crate::api::stats::{StageTime, Stats};
+use crate::api::stats::{StageTime, Stats, TiledForMemory};
 use crate::candidates;
 use crate::control::Control;
 use crate::greedy;
@@ -85,6 +85,8 @@ impl Prepared<'_> {
         if let Some(p) = &job.partition {
             return self.place_tiled(p.tiles, opts, ctl);
         }
+        // What the run holds before its problem views: a tile holds as much.
+        let before = current_rss_bytes();
         let mut st = Stages::new(ctl, self.seconds());
         st.begin(
             "problem_views",
@@ -102,22 +104,60 @@ impl Prepared<'_> {
         let t = PairCounts::totals(&pv.node_counts);
         let held = t.explicit.max(t.bit_words).max(t.cells);
         if predicted > limit || held >= u64::from(u32::MAX) {
+            let budgeted = job.memory.budget_bytes.is_some();
+            let split = (!budgeted)
+                .then(|| tiles_for_memory(&pv.grid, before, predicted, limit, held))
+                .flatten();
+            if let Some(tiles) = split {
+                let seconds = st.times.last().map_or(0.0, |t| t.seconds);
+                drop(pv);
+                release_memory();
+                ctl.progress(
+                    "tiles",
+                    0.0,
+                    &format!(
+                        "the job needs about {:.2} GB, more than the {:.2} GB {}: placing it in \
+                         {} × {} tiles",
+                        predicted as f64 / 1e9,
+                        limit as f64 / 1e9,
+                        limit_name(opts),
+                        tiles[0],
+                        tiles[1]
+                    ),
+                );
+                let mut out = self.place_tiled(tiles, opts, ctl)?;
+                out.stats.tiled_for_memory = Some(TiledForMemory {
+                    tiles,
+                    predicted_bytes: predicted,
+                    limit_bytes: limit,
+                    problem_views_seconds: seconds,
+                });
+                return Ok(out);
+            }
             return Err(Error::bad(
                 self.job_name(),
                 format!(
-                    "the job needs about {:.1} GB ({} problem views listing {} (problem view, cluster) pairs \
-                     over a scene of {} objects), more than the {:.1} GB {}; raise \
-                     target_frame_time_ms, enlarge problem_views.cell_size or min_vdi_deg, shrink the \
-                     view space, or place it in tiles (\"partition\": {{\"tiles\": [2, 2]}} holds about \
-                     a quarter of the pairs at a time)",
+                    "the job needs about {:.2} GB ({} problem views listing {} (problem view, cluster) pairs \
+                     over a scene of {} objects), more than the {:.2} GB {}, and {}; raise \
+                     target_frame_time_ms, enlarge problem_views.cell_size or min_vdi_deg, or shrink the \
+                     view space",
                     predicted as f64 / 1e9,
                     pv.cpvs.len(),
                     counters.pairs(),
                     ctx.scene.objects.len(),
                     limit as f64 / 1e9,
-                    match (opts.max_memory_bytes, opts.max_memory_name) {
-                        (Some(_), Some(name)) => format!("{name} allows"),
-                        _ => "available".to_string(),
+                    limit_name(opts),
+                    if budgeted {
+                        "tiles, which hold a share of it each, cannot share a memory budget \
+                         (memory.budget_bytes)"
+                            .to_string()
+                    } else if limit <= before {
+                        format!(
+                            "the scene alone holds {:.2} GB, so tiles would not fit either",
+                            before as f64 / 1e9
+                        )
+                    } else {
+                        "tiles of its grid's cells would not fit either".to_string()
                     }
                 ),
             ));
@@ -325,6 +365,52 @@ impl Prepared<'_> {
     }
 }
 
+/// Who set a run's memory limit, as its refusal names it.
+fn limit_name(opts: &PlaceOptions) -> String {
+    match (opts.max_memory_bytes, opts.max_memory_name) {
+        (Some(_), Some(name)) => format!("{name} allows"),
+        _ => "available".to_string(),
+    }
+}
+
+/// The tiles (`[nx, nz]`) a job predicted to need `predicted` bytes, more
+/// than `limit`, is placed in instead, or `None` when tiles cannot bring it
+/// within the limit. `before` is what the run held before its problem
+/// views (the scene, its hierarchy and visibility), which every tile holds
+/// again; the rest grows with the problem views, which tiles of the grid
+/// `grid` partition, so a tile needs about its share of it. Tiles are asked
+/// to hold a fifth less than the limit leaves (a tile that sees more than
+/// its share), and `held` (the pairs' 32-bit ids) below `u32::MAX` per tile
+/// likewise. Counts double, the side of longer tiles first, so the answer
+/// moves only when the need doubles; at most one tile per grid cell and
+/// 64 per side. A tile still above the limit is split again by its own run.
+pub fn tiles_for_memory(
+    grid: &crate::math::grid::Grid,
+    before: u64,
+    predicted: u64,
+    limit: u64,
+    held: u64,
+) -> Option<[u32; 2]> {
+    let room = limit.checked_sub(before).filter(|&r| r > 0)?;
+    let grows = predicted.saturating_sub(before) as f64;
+    let need = (grows * 1.25 / room as f64)
+        .max(held as f64 * 1.25 / f64::from(u32::MAX))
+        .max(2.0);
+    let cells = [grid.counts[0].min(64), grid.counts[2].min(64)];
+    let mut n = [1u32, 1u32];
+    while f64::from(n[0] * n[1]) < need {
+        // Cells per tile along each side; split the longer tiles.
+        let long = |a: usize| f64::from(cells[a]) / f64::from(n[a]);
+        let a = if long(0) >= long(1) { 0 } else { 1 };
+        let a = if n[a] < cells[a] { a } else { 1 - a };
+        if n[a] >= cells[a] {
+            return None;
+        }
+        n[a] = (n[a] * 2).min(cells[a]);
+    }
+    Some(n)
+}
+
 /// Bytes a run holds per explicit (CPV, cluster) pair from candidate
 /// generation on: its CPV id (the pairs below cut nodes take none).
 pub const BYTES_PER_PAIR: u64 = 4;
@@ -401,6 +487,21 @@ fn meminfo_kb(path: &str, key: &str) -> Option<u64> {
         .next()?
         .parse()
         .ok()
+}
+
+/// Gives the heap freed memory back to the system: glibc keeps freed
+/// memory in its arenas, so after a job of several gigabytes an idle server
+/// would stay that large, and a tile's run would count what the tiles before
+/// it freed as held. One of the workspace's two `unsafe` blocks: a libc call
+/// with no preconditions.
+#[allow(unsafe_code)]
+pub fn release_memory() {
+    #[cfg(all(target_os = "linux", target_env = "gnu"))]
+    // SAFETY: malloc_trim only returns free heap pages to the system; it
+    // has no preconditions and touches no memory in use.
+    unsafe {
+        libc::malloc_trim(0);
+    }
 }
 
 /// Peak resident set size of this process (VmHWM), bytes; 0 when unknown.
@@ -599,6 +700,60 @@ mod tests {
             ..PlaceOptions::default()
         };
         assert!(try_place(&scene, &job, &opts, &Control::default()).is_ok());
+    }
+
+    /// Tiles for a job above its memory limit, by hand: the need is the
+    /// growth over what the limit leaves, with a quarter's margin; the
+    /// longer tiles split first, counts doubling, at most one tile per cell.
+    #[test]
+    fn tiles_for_memory_split_the_growth_the_limit_leaves() {
+        use crate::math::grid::Grid;
+        const GB: u64 = 1_000_000_000;
+        // 20 × 10 cells of 10 m (y: one).
+        let grid = Grid::new(
+            glam::DVec3::ZERO,
+            glam::DVec3::new(200.0, 2.0, 100.0),
+            10.0,
+            glam::DVec3::ZERO,
+        );
+        assert_eq!(grid.counts, [20, 1, 10]);
+        // 1 GB held, 4 GB of growth, 2 GB of room: 4 × 1.25 / 2 = 2.5
+        // tiles, so 4: x (20 cells) first, then x again (10 against 10).
+        assert_eq!(tiles_for_memory(&grid, GB, 5 * GB, 3 * GB, 0), Some([4, 1]));
+        // Just above the limit: two tiles, never one.
+        assert_eq!(
+            tiles_for_memory(&grid, GB, 3 * GB + 1, 3 * GB, 0),
+            Some([2, 1])
+        );
+        // 4 × 1.25 / 0.5 = 10 tiles: x to 2 and 4 (5 cells a tile against
+        // z's 10), z to 2 (5 against 5), x to 8: 16 tiles.
+        assert_eq!(
+            tiles_for_memory(&grid, GB, 5 * GB, GB + GB / 2, 0),
+            Some([8, 2])
+        );
+        // The pairs' 32-bit ids alone: 3 × u32::MAX × 1.25 → 4 tiles.
+        let held = 3 * u64::from(u32::MAX);
+        assert_eq!(
+            tiles_for_memory(&grid, GB, 2 * GB, 3 * GB, held),
+            Some([4, 1])
+        );
+        // The scene alone at or above the limit: no tiles fit.
+        assert_eq!(tiles_for_memory(&grid, 3 * GB, 5 * GB, 3 * GB, 0), None);
+        assert_eq!(tiles_for_memory(&grid, 4 * GB, 5 * GB, 3 * GB, 0), None);
+        // More tiles than cells: no split can hold it.
+        assert_eq!(tiles_for_memory(&grid, GB, 500 * GB, 3 * GB, 0), None);
+        // A 3 × 1 grid: counts stop at the cells (2, then 3).
+        let narrow = Grid::new(
+            glam::DVec3::ZERO,
+            glam::DVec3::new(30.0, 2.0, 10.0),
+            10.0,
+            glam::DVec3::ZERO,
+        );
+        assert_eq!(
+            tiles_for_memory(&narrow, GB, 3 * GB, 2 * GB, 0),
+            Some([3, 1])
+        );
+        assert_eq!(tiles_for_memory(&narrow, GB, 4 * GB, 2 * GB, 0), None);
     }
 
     #[test]

@@ -68,6 +68,8 @@ impl Prepared<'_> {
             let name = format!("{} (tile {})", self.job_name(), k + 1);
             let out = self.input().prepare(t, &name)?.place(opts, ctl)?;
             outs.push((t, out));
+            // The next tile's memory check reads what the process holds.
+            crate::place::release_memory();
         }
         let placement = merge(self.job(), outs.iter().map(|(_, o)| &o.placement))?;
         let mut stats = Stats::default();
