@@ -292,7 +292,10 @@ fn jobs_predicted_beyond_the_memory_limit_are_tiled_or_refused() {
     let n = t["tiles"][0].as_u64().unwrap() * t["tiles"][1].as_u64().unwrap();
     assert!(n >= 2, "{t}");
     assert!(t["predicted_bytes"].as_u64().unwrap() > limit, "{t}");
-    assert!(tiled["tiles"].as_array().unwrap().len() as u64 >= n, "{tiled}");
+    assert!(
+        tiled["tiles"].as_array().unwrap().len() as u64 >= n,
+        "{tiled}"
+    );
     assert_eq!(read_json(&out)["summary"]["cpvs"].as_u64(), Some(cpvs));
     // Nonsense limits are argument errors.
     for bad in ["0", "-1", "NaN", "lots"] {

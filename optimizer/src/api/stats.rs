@@ -124,8 +124,8 @@ pub struct TiledForMemory {
     /// The memory limit it exceeded, bytes (`--max-memory-gb`, the
     /// server's per-job limit, or the memory available).
     pub limit_bytes: u64,
-    /// Seconds spent on the whole job's problem views before the split
-    /// (the tiles compute their own; included in no stage of `seconds`).
+    /// Seconds the whole job's problem views took before the split (the
+    /// tiles take theirs from them; included in `seconds`' problem views).
     pub problem_views_seconds: f64,
 }
 

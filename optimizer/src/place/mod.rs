@@ -76,14 +76,28 @@ impl<'c> Stages<'c> {
 
 impl Prepared<'_> {
     /// Places impostors for the prepared job, reporting progress and
-    /// stopping on cancellation ([`Error::Cancelled`]) through `ctl`. Fails
-    /// with [`Error::BadInput`] naming the job when its predicted peak
-    /// memory exceeds `opts.max_memory_bytes` (default: the machine's).
+    /// stopping on cancellation ([`Error::Cancelled`]) through `ctl`. A job
+    /// whose predicted peak memory exceeds `opts.max_memory_bytes` (default:
+    /// the memory available) is placed in tiles that fit
+    /// ([`tiles_for_memory`]); one no tiling fits fails with
+    /// [`Error::BadInput`] naming the job.
     pub fn place(&self, opts: &PlaceOptions, ctl: &Control) -> Result<PlaceOutput> {
+        self.place_within(opts, ctl, None)
+    }
+
+    /// [`Self::place`] for a tile of a job whose problem views are `whole`
+    /// (the tile takes its own from them, [`views::restrict`]), or for a
+    /// job of its own (`None`).
+    pub(crate) fn place_within(
+        &self,
+        opts: &PlaceOptions,
+        ctl: &Control,
+        whole: Option<&ProblemViews>,
+    ) -> Result<PlaceOutput> {
         let job = self.job();
         job.method().check_places(self.job_name())?;
         if let Some(p) = &job.partition {
-            return self.place_tiled(p.tiles, opts, ctl);
+            return self.place_tiled(p.tiles, opts, ctl, None);
         }
         // What the run holds before its problem views: a tile holds as much.
         let before = current_rss_bytes();
@@ -95,7 +109,10 @@ impl Prepared<'_> {
         );
         let ctx = Context::new(self.scene(), self.hierarchy(), self.visibility(), job, *ctl);
         let counters = Counters::new();
-        let pv = views::approximate(&ctx, job, &counters);
+        let mut pv = match whole {
+            Some(w) => views::restrict(&ctx, job, w, &counters),
+            None => views::approximate(&ctx, job, &counters),
+        };
         st.end("problem_views");
         ctl.check()?;
         let predicted = predicted_peak_bytes(&ctx, job, &pv);
@@ -110,7 +127,9 @@ impl Prepared<'_> {
                 .flatten();
             if let Some(tiles) = split {
                 let seconds = st.times.last().map_or(0.0, |t| t.seconds);
-                drop(pv);
+                // The tiles take their problem views from these; the counts
+                // they make again.
+                pv.node_counts = Vec::new();
                 release_memory();
                 ctl.progress(
                     "tiles",
@@ -125,7 +144,19 @@ impl Prepared<'_> {
                         tiles[1]
                     ),
                 );
-                let mut out = self.place_tiled(tiles, opts, ctl)?;
+                let mut out = self.place_tiled(tiles, opts, ctl, Some(&pv))?;
+                // The approximation's work was this run's, not the tiles'.
+                out.stats.enclosing_frusta += pv.cone_evaluations;
+                out.stats.regions_visited += pv.regions_visited;
+                out.stats.cpvs_refined_away += pv.refined_away;
+                if let Some(t) = out
+                    .stats
+                    .seconds
+                    .iter_mut()
+                    .find(|t| t.stage == "problem_views")
+                {
+                    t.seconds += seconds;
+                }
                 out.stats.tiled_for_memory = Some(TiledForMemory {
                     tiles,
                     predicted_bytes: predicted,

@@ -14,6 +14,7 @@ use crate::api::stats::{StageTime, Stats, TileStats};
 use crate::control::Control;
 use crate::input::Prepared;
 use crate::place::{PlaceOptions, PlaceOutput};
+use crate::views::ProblemViews;
 use crate::{Error, Result};
 
 /// The tiles' view spaces: `[nx, nz]` tiles (at most one per grid cell
@@ -49,12 +50,14 @@ pub fn tile_jobs(job: &Job, tiles: [u32; 2]) -> Vec<Job> {
 }
 
 impl Prepared<'_> {
-    /// [`Prepared::place`] tile by tile, merged (see the module docs).
+    /// [`Prepared::place`] tile by tile, merged (see the module docs); with
+    /// `whole`, the job's problem views, each tile takes its own from them.
     pub(crate) fn place_tiled(
         &self,
         tiles: [u32; 2],
         opts: &PlaceOptions,
         ctl: &Control,
+        whole: Option<&ProblemViews>,
     ) -> Result<PlaceOutput> {
         let jobs = tile_jobs(self.job(), tiles);
         let mut outs = Vec::with_capacity(jobs.len());
@@ -66,7 +69,10 @@ impl Prepared<'_> {
                 &format!("tile {} of {}", k + 1, jobs.len()),
             );
             let name = format!("{} (tile {})", self.job_name(), k + 1);
-            let out = self.input().prepare(t, &name)?.place(opts, ctl)?;
+            let out = self
+                .input()
+                .prepare(t, &name)?
+                .place_within(opts, ctl, whole)?;
             outs.push((t, out));
             // The next tile's memory check reads what the process holds.
             crate::place::release_memory();

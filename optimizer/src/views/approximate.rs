@@ -1,6 +1,8 @@
 //! The approximation itself: the kd tree over the grid, the direction
 //! quadtrees per region, and the recursion that keeps problem views.
 
+use rayon::prelude::*;
+
 use crate::api::job::Job;
 use crate::math::enclosing::enclosing_cone;
 use crate::math::geom::{Aabb, Vdi};
@@ -645,11 +647,130 @@ pub(super) fn approximate_near(
     }
 }
 
+/// The problem views of `job`, a part of the job whose problem views are
+/// `whole` on the same grid (a tile: its view space's sides on the grid's
+/// planes), taken from `whole` instead of approximated again: a cell's CPVs
+/// depend on the cell alone (a direction proven for a region is proven for
+/// every cell in it, so the kd tree above a cell only saves work), so they
+/// are `whole`'s CPVs of the cells inside `job`'s view space, in the order of
+/// `job`'s kd tree; the per-cluster counts are made again from their lists.
+/// The work counters are zero (the work was `whole`'s).
+pub fn restrict(
+    ctx: &Context,
+    job: &Job,
+    whole: &ProblemViews,
+    counters: &Counters,
+) -> ProblemViews {
+    let grid = job.grid();
+    let kd = build_kd(&grid);
+    // The kd leaf of each cell (ids are in depth-first order, the order
+    // `process` gives its CPVs).
+    let mut leaf_of = vec![u32::MAX; grid.len() as usize];
+    for (id, n) in kd.iter().enumerate() {
+        if n.children.is_none() {
+            leaf_of[grid.linear(n.lo) as usize] = id as u32;
+        }
+    }
+    let mut cpvs: Vec<Cpv> = whole
+        .cpvs
+        .iter()
+        .filter_map(|c| {
+            let cell = grid.cell_of(whole.kd[c.kd as usize].aabb.center())?;
+            Some(Cpv {
+                kd: leaf_of[grid.linear(cell) as usize],
+                ..c.clone()
+            })
+        })
+        .collect();
+    // Stable: a cell's CPVs keep `whole`'s order.
+    cpvs.sort_by_key(|c| c.kd);
+    let cells = ProblemViews::cells_of(&cpvs);
+    let node_counts = cells
+        .par_iter()
+        .fold(Vec::new, |mut sum: Vec<PairCounts>, r| {
+            let cell = &cpvs[r.start as usize..r.end as usize];
+            let node = &kd[cell[0].kd as usize];
+            let costs = RegionCosts::of_kd(ctx, node, counters);
+            let listable = Listable::new(ctx, &costs, &cell[0].region);
+            let cuts: Vec<CpvCut> = cell
+                .iter()
+                .map(|c| cpv_cut(ctx, &costs, &listable, &c.region, &c.vdi))
+                .collect();
+            let counts = cell_pair_counts(ctx, &costs, &listable, &cuts);
+            if sum.is_empty() {
+                return counts;
+            }
+            for (x, y) in sum.iter_mut().zip(counts) {
+                *x += y;
+            }
+            sum
+        })
+        .reduce(Vec::new, |mut a, b| {
+            if a.is_empty() {
+                return b;
+            }
+            for (x, y) in a.iter_mut().zip(b) {
+                *x += y;
+            }
+            a
+        });
+    ProblemViews {
+        grid,
+        kd,
+        cpvs,
+        node_counts: if node_counts.is_empty() {
+            vec![PairCounts::default(); ctx.hierarchy.nodes.len()]
+        } else {
+            node_counts
+        },
+        leaf_level: whole.leaf_level,
+        cone_evaluations: 0,
+        regions_visited: 0,
+        refined_away: 0,
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use glam::DVec3;
 
     use super::*;
+
+    /// A tile's problem views taken from the whole job's are the ones the
+    /// tile's own approximation finds: the same CPVs (cell, region,
+    /// direction, cost), in the same order, and the same per-cluster counts;
+    /// the tiles together hold the whole's CPVs.
+    #[test]
+    fn restricted_problem_views_are_the_tiles_own() {
+        use crate::control::Control;
+        use crate::scene::hierarchy::Hierarchy;
+        use crate::testutil::{synthetic_city, synthetic_job};
+        let scene = synthetic_city(3, 6, 5);
+        let mut job = synthetic_job(6, 5);
+        job.target_frame_time_ms = 3.0;
+        job.problem_views.grid_origin = [10.0, 0.0, 10.0];
+        let h = Hierarchy::build(&scene);
+        let ctx = Context::new(&scene, &h, None, &job, Control::default());
+        let whole = approximate(&ctx, &job, &Counters::new());
+        assert!(whole.cpvs.len() > 100, "{}", whole.cpvs.len());
+        for tiles in [[2, 2], [3, 1], [1, 4]] {
+            let mut found = 0;
+            for t in crate::place::tiles::tile_jobs(&job, tiles) {
+                let ctx = Context::new(&scene, &h, None, &t, Control::default());
+                let own = approximate(&ctx, &t, &Counters::new());
+                let taken = restrict(&ctx, &t, &whole, &Counters::new());
+                assert_eq!(
+                    format!("{:?}", taken.cpvs),
+                    format!("{:?}", own.cpvs),
+                    "{tiles:?}"
+                );
+                assert_eq!(taken.node_counts, own.node_counts, "{tiles:?}");
+                assert_eq!(taken.kd.len(), own.kd.len());
+                found += taken.cpvs.len();
+            }
+            assert_eq!(found, whole.cpvs.len(), "{tiles:?}");
+        }
+    }
 
     /// A kd node splits at the grid plane nearest its middle, wherever the
     /// grid's phase puts the thin cells at the view space's sides.

@@ -19,9 +19,9 @@ mod context;
 mod costs;
 mod precision;
 
-pub use approximate::approximate;
 #[cfg(test)]
 use approximate::approximate_near;
+pub use approximate::{approximate, restrict};
 pub use context::{Context, Counters};
 pub use costs::{
     CellCuts, CpvCut, Listable, RegionCosts, cpv_clusters, cpv_cut, enclosed_cost, enclosing_time,
@@ -160,10 +160,15 @@ impl ProblemViews {
     /// The cells with CPVs, as ranges of CPV ids (a cell's CPVs are
     /// contiguous), in kd order.
     pub fn cells(&self) -> Vec<crate::math::IdRange> {
+        Self::cells_of(&self.cpvs)
+    }
+
+    /// [`Self::cells`] of a list of CPVs in kd order.
+    pub fn cells_of(cpvs: &[Cpv]) -> Vec<crate::math::IdRange> {
         let mut cells: Vec<crate::math::IdRange> = Vec::new();
-        for (i, c) in self.cpvs.iter().enumerate() {
+        for (i, c) in cpvs.iter().enumerate() {
             match cells.last_mut() {
-                Some(r) if self.cpvs[r.start as usize].kd == c.kd => r.end = i as u32 + 1,
+                Some(r) if cpvs[r.start as usize].kd == c.kd => r.end = i as u32 + 1,
                 _ => cells.push(crate::math::IdRange::new(i as u32, i as u32 + 1)),
             }
         }
