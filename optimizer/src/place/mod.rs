@@ -133,7 +133,7 @@ impl Prepared<'_> {
                 release_memory();
                 ctl.progress(
                     "tiles",
-                    0.0,
+                    0.05,
                     &format!(
                         "the job needs about {:.2} GB, more than the {:.2} GB {}: placing it in \
                          {} × {} tiles",
@@ -680,6 +680,34 @@ mod tests {
             serde_json::to_string(&plain.placement).unwrap()
         );
         let seen = seen.into_inner().unwrap();
+        assert!(seen.windows(2).all(|w| w[0].1 <= w[1].1), "{seen:?}");
+        assert_eq!(seen.last().unwrap(), &("placement".to_string(), 1.0));
+        // Tiles report within their share of the run: still never back.
+        let tiled = Job {
+            partition: Some(crate::api::job::Partition { tiles: [2, 2] }),
+            ..job.clone()
+        };
+        let seen = std::sync::Mutex::new(Vec::<(String, f64)>::new());
+        let report = |e: Event| {
+            if let Event::Progress {
+                stage, fraction, ..
+            } = e
+            {
+                seen.lock().unwrap().push((stage.into(), fraction));
+            }
+        };
+        try_place(
+            &scene,
+            &tiled,
+            &PlaceOptions::default(),
+            &Control::observed(&report),
+        )
+        .unwrap();
+        let seen = seen.into_inner().unwrap();
+        assert!(
+            seen.iter().filter(|s| s.0 == "tiles").count() == 4,
+            "{seen:?}"
+        );
         assert!(seen.windows(2).all(|w| w[0].1 <= w[1].1), "{seen:?}");
         assert_eq!(seen.last().unwrap(), &("placement".to_string(), 1.0));
 

@@ -11,7 +11,7 @@ use std::collections::HashMap;
 use crate::api::job::Job;
 use crate::api::placement::{Placement, Summary};
 use crate::api::stats::{StageTime, Stats, TileStats};
-use crate::control::Control;
+use crate::control::{Control, Event, Observer};
 use crate::input::Prepared;
 use crate::place::{PlaceOptions, PlaceOutput};
 use crate::views::ProblemViews;
@@ -60,19 +60,34 @@ impl Prepared<'_> {
         whole: Option<&ProblemViews>,
     ) -> Result<PlaceOutput> {
         let jobs = tile_jobs(self.job(), tiles);
+        let n = jobs.len() as f64;
+        // Progress from here on (the whole's problem views, when given, came
+        // first); a tile's run reports within its share.
+        let from = if whole.is_some() { 0.05 } else { 0.0 };
         let mut outs = Vec::with_capacity(jobs.len());
         for (k, t) in jobs.iter().enumerate() {
             ctl.check()?;
-            ctl.progress(
-                "tiles",
-                k as f64 / jobs.len() as f64,
-                &format!("tile {} of {}", k + 1, jobs.len()),
-            );
+            let share = |f: f64| from + (1.0 - from) * (k as f64 + f) / n;
+            let tile = format!("tile {} of {}", k + 1, jobs.len());
+            ctl.progress("tiles", share(0.0), &tile);
+            let outer = *ctl;
+            let observe = |e: Event<'_>| match e {
+                Event::Progress {
+                    stage,
+                    fraction,
+                    message,
+                } => outer.progress(stage, share(fraction), &format!("{tile}: {message}")),
+                Event::StageDone { stage, seconds } => outer.stage_done(stage, seconds),
+            };
+            let inner = Control {
+                cancel: ctl.cancel,
+                observer: ctl.observer.is_some().then_some(&observe as Observer),
+            };
             let name = format!("{} (tile {})", self.job_name(), k + 1);
             let out = self
                 .input()
                 .prepare(t, &name)?
-                .place_within(opts, ctl, whole)?;
+                .place_within(opts, &inner, whole)?;
             outs.push((t, out));
             // The next tile's memory check reads what the process holds.
             crate::place::release_memory();
