@@ -297,6 +297,17 @@ fn jobs_predicted_beyond_the_memory_limit_are_tiled_or_refused() {
         "{tiled}"
     );
     assert_eq!(read_json(&out)["summary"]["cpvs"].as_u64(), Some(cpvs));
+    // Tiles the job chose are kept: one tile ([1, 1]) at that limit is
+    // refused, naming the partition, and writes nothing.
+    let mut chosen = read_json(&job);
+    chosen["partition"] = serde_json::json!({"tiles": [1, 1]});
+    let chosen_job = dir.join("one-tile.json");
+    std::fs::write(&chosen_job, chosen.to_string()).unwrap();
+    let one = dir.join("one-tile-placement.json");
+    let o = place(&scene, &chosen_job, &one, &["--max-memory-gb", &gb]);
+    assert_eq!(code(&o), 2, "{}", stderr(&o));
+    assert!(stderr(&o).contains("\"partition\""), "{}", stderr(&o));
+    assert!(!one.exists());
     // Nonsense limits are argument errors.
     for bad in ["0", "-1", "NaN", "lots"] {
         let o = place(&scene, &job, &out, &["--max-memory-gb", bad]);

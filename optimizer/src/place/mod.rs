@@ -82,17 +82,19 @@ impl Prepared<'_> {
     /// ([`tiles_for_memory`]); one no tiling fits fails with
     /// [`Error::BadInput`] naming the job.
     pub fn place(&self, opts: &PlaceOptions, ctl: &Control) -> Result<PlaceOutput> {
-        self.place_within(opts, ctl, None)
+        self.place_within(opts, ctl, None, true)
     }
 
     /// [`Self::place`] for a tile of a job whose problem views are `whole`
     /// (the tile takes its own from them, [`views::restrict`]), or for a
-    /// job of its own (`None`).
+    /// job of its own (`None`); split into tiles for memory only where
+    /// `may_split` (not a tile of a job whose `partition` chose its tiles).
     pub(crate) fn place_within(
         &self,
         opts: &PlaceOptions,
         ctl: &Control,
         whole: Option<&ProblemViews>,
+        may_split: bool,
     ) -> Result<PlaceOutput> {
         let job = self.job();
         job.method().check_places(self.job_name())?;
@@ -122,7 +124,7 @@ impl Prepared<'_> {
         let held = t.explicit.max(t.bit_words).max(t.cells);
         if predicted > limit || held >= u64::from(u32::MAX) {
             let budgeted = job.memory.budget_bytes.is_some();
-            let split = (!budgeted)
+            let split = (!budgeted && may_split)
                 .then(|| tiles_for_memory(&pv.grid, before, predicted, limit, held))
                 .flatten();
             if let Some(tiles) = split {
@@ -178,7 +180,10 @@ impl Prepared<'_> {
                     ctx.scene.objects.len(),
                     limit as f64 / 1e9,
                     limit_name(opts),
-                    if budgeted {
+                    if !may_split {
+                        "its tiles are the job's \"partition\" (more tiles hold less each)"
+                            .to_string()
+                    } else if budgeted {
                         "tiles, which hold a share of it each, cannot share a memory budget \
                          (memory.budget_bytes)"
                             .to_string()

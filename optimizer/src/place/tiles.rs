@@ -51,7 +51,9 @@ pub fn tile_jobs(job: &Job, tiles: [u32; 2]) -> Vec<Job> {
 
 impl Prepared<'_> {
     /// [`Prepared::place`] tile by tile, merged (see the module docs); with
-    /// `whole`, the job's problem views, each tile takes its own from them.
+    /// `whole`, the job's problem views, each tile takes its own from them
+    /// and may be split again for memory; without (the job's `partition`),
+    /// the tiles are the job's choice and a tile above the limit is refused.
     pub(crate) fn place_tiled(
         &self,
         tiles: [u32; 2],
@@ -84,10 +86,12 @@ impl Prepared<'_> {
                 observer: ctl.observer.is_some().then_some(&observe as Observer),
             };
             let name = format!("{} (tile {})", self.job_name(), k + 1);
-            let out = self
-                .input()
-                .prepare(t, &name)?
-                .place_within(opts, &inner, whole)?;
+            let out = self.input().prepare(t, &name)?.place_within(
+                opts,
+                &inner,
+                whole,
+                whole.is_some(),
+            )?;
             outs.push((t, out));
             // The next tile's memory check reads what the process holds.
             crate::place::release_memory();
