@@ -668,23 +668,31 @@ mod tests {
     fn control_reports_progress_and_cancels() {
         let scene = synthetic_city(1, 5, 5);
         let job = synthetic_job(5, 5);
-        let seen = std::sync::Mutex::new(Vec::<(String, f64)>::new());
-        let report = |e: Event| {
-            if let Event::Progress {
-                stage, fraction, ..
-            } = e
-            {
-                seen.lock().unwrap().push((stage.into(), fraction));
-            }
+        // Runs `job`, returning its placement and the progress it reported.
+        let observed = |job: &Job| {
+            let seen = std::sync::Mutex::new(Vec::<(String, f64)>::new());
+            let report = |e: Event| {
+                if let Event::Progress {
+                    stage, fraction, ..
+                } = e
+                {
+                    seen.lock().unwrap().push((stage.into(), fraction));
+                }
+            };
+            let out = try_place(
+                &scene,
+                job,
+                &PlaceOptions::default(),
+                &Control::observed(&report),
+            );
+            (out.unwrap(), seen.into_inner().unwrap())
         };
-        let ctl = Control::observed(&report);
-        let out = try_place(&scene, &job, &PlaceOptions::default(), &ctl).unwrap();
+        let (out, seen) = observed(&job);
         let plain = try_place(&scene, &job, &PlaceOptions::default(), &Control::default()).unwrap();
         assert_eq!(
             serde_json::to_string(&out.placement).unwrap(),
             serde_json::to_string(&plain.placement).unwrap()
         );
-        let seen = seen.into_inner().unwrap();
         assert!(seen.windows(2).all(|w| w[0].1 <= w[1].1), "{seen:?}");
         assert_eq!(seen.last().unwrap(), &("placement".to_string(), 1.0));
         // Tiles report within their share of the run: still never back.
@@ -692,23 +700,7 @@ mod tests {
             partition: Some(crate::api::job::Partition { tiles: [2, 2] }),
             ..job.clone()
         };
-        let seen = std::sync::Mutex::new(Vec::<(String, f64)>::new());
-        let report = |e: Event| {
-            if let Event::Progress {
-                stage, fraction, ..
-            } = e
-            {
-                seen.lock().unwrap().push((stage.into(), fraction));
-            }
-        };
-        try_place(
-            &scene,
-            &tiled,
-            &PlaceOptions::default(),
-            &Control::observed(&report),
-        )
-        .unwrap();
-        let seen = seen.into_inner().unwrap();
+        let (_, seen) = observed(&tiled);
         assert!(
             seen.iter().filter(|s| s.0 == "tiles").count() == 4,
             "{seen:?}"
