@@ -69,7 +69,8 @@ pub struct Config {
     pub job_max_seconds: Option<u64>,
     /// The most memory a job's placement may be predicted to need, bytes
     /// (`--job-max-memory`; default: the machine's): a job predicted to need
-    /// more ends `failed` before the memory is allocated.
+    /// more is placed in tiles that fit; one no tiling fits ends `failed`
+    /// before the memory is allocated.
     pub job_max_memory_bytes: Option<u64>,
     /// How long a finished job (succeeded, failed or cancelled) and its
     /// files are kept, days (`--retain-days`; default: for ever).

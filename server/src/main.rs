@@ -73,9 +73,9 @@ struct JobLimits {
     #[arg(long, value_name = "SECONDS", value_parser = clap::value_parser!(u64).range(1..))]
     job_max_seconds: Option<u64>,
     /// The most memory a job's placement may be predicted to need, GB: a
-    /// job predicted to need more ends `failed` before allocating it
-    /// (default: the memory available: what the machine has free, plus what
-    /// the process holds).
+    /// job predicted to need more is placed in tiles that fit, and one no
+    /// tiling fits ends `failed` before allocating it (default: the memory
+    /// available: what the machine has free, plus what the process holds).
     #[arg(long, value_name = "GB", value_parser = parse_gb)]
     job_max_memory: Option<u64>,
 }
