@@ -56,14 +56,12 @@ pub fn run(a: PlaceArgs) -> Result<ExitCode> {
     let prepared = input.prepare(&job, &a.input.job_name())?;
     let progress = Progress::spinner(a.verbose);
     let observer = |e: optimizer::control::Event<'_>| progress.event(e);
-    let output = prepared.place(
-        &PlaceOptions {
-            prune: a.prune,
-            max_memory_bytes: a.max_memory_gb,
-            max_memory_name: Some("--max-memory-gb"),
-        },
-        &Control::observed(&observer),
-    )?;
+    let opts = PlaceOptions {
+        prune: a.prune,
+        max_memory_bytes: a.max_memory_gb,
+        max_memory_name: Some("--max-memory-gb"),
+    };
+    let output = prepared.place(&opts, &Control::observed(&observer))?;
     drop(progress);
     write_json(a.out.as_deref(), &output.placement)?;
     if let Some(s) = &a.stats {
@@ -78,11 +76,7 @@ pub fn run(a: PlaceArgs) -> Result<ExitCode> {
             t.tiles[1],
             t.predicted_bytes as f64 / 1e9,
             t.limit_bytes as f64 / 1e9,
-            if a.max_memory_gb.is_some() {
-                "--max-memory-gb allows"
-            } else {
-                "available"
-            }
+            opts.limit_name()
         );
     }
     eprintln!(

@@ -31,6 +31,17 @@ pub struct PlaceOptions {
     pub max_memory_name: Option<&'static str>,
 }
 
+impl PlaceOptions {
+    /// Who set the memory limit, as messages name it: "`name` allows", or
+    /// "available" for the memory available.
+    pub fn limit_name(&self) -> String {
+        match (self.max_memory_bytes, self.max_memory_name) {
+            (Some(_), Some(name)) => format!("{name} allows"),
+            _ => "available".to_string(),
+        }
+    }
+}
+
 /// The result of [`Prepared::place`].
 #[derive(Clone, Debug)]
 pub struct PlaceOutput {
@@ -141,7 +152,7 @@ impl Prepared<'_> {
                          {} × {} tiles",
                         predicted as f64 / 1e9,
                         limit as f64 / 1e9,
-                        limit_name(opts),
+                        opts.limit_name(),
                         tiles[0],
                         tiles[1]
                     ),
@@ -179,7 +190,7 @@ impl Prepared<'_> {
                     counters.pairs(),
                     ctx.scene.objects.len(),
                     limit as f64 / 1e9,
-                    limit_name(opts),
+                    opts.limit_name(),
                     if !may_split {
                         "its tiles are the job's \"partition\" (more tiles hold less each)"
                             .to_string()
@@ -398,14 +409,6 @@ impl Prepared<'_> {
             lod: counters.lod_stats(ctx.scene, self.input().lod.clone()),
             ..Stats::default()
         }
-    }
-}
-
-/// Who set a run's memory limit, as its refusal names it.
-fn limit_name(opts: &PlaceOptions) -> String {
-    match (opts.max_memory_bytes, opts.max_memory_name) {
-        (Some(_), Some(name)) => format!("{name} allows"),
-        _ => "available".to_string(),
     }
 }
 

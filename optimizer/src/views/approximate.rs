@@ -458,6 +458,36 @@ fn cell_pair_counts(
     counts
 }
 
+/// The lists of one cell's CPVs, (`region`, each of `vdis`): what may be
+/// listed there, each CPV's cut, and per cluster what the lists hold of it
+/// ([`cell_pair_counts`]).
+fn cell_lists(
+    ctx: &Context,
+    costs: &RegionCosts,
+    region: &Aabb,
+    vdis: &[Vdi],
+) -> (Listable, Vec<CpvCut>, Vec<PairCounts>) {
+    let listable = Listable::new(ctx, costs, region);
+    let cuts: Vec<CpvCut> = vdis
+        .iter()
+        .map(|vdi| cpv_cut(ctx, costs, &listable, region, vdi))
+        .collect();
+    let counts = cell_pair_counts(ctx, costs, &listable, &cuts);
+    (listable, cuts, counts)
+}
+
+/// Per-cluster counts `a` and `b` summed (an empty list counts nothing).
+fn sum_counts(a: Vec<PairCounts>, b: Vec<PairCounts>) -> Vec<PairCounts> {
+    if a.is_empty() {
+        return b;
+    }
+    let mut sum = a;
+    for (x, y) in sum.iter_mut().zip(b) {
+        *x += y;
+    }
+    sum
+}
+
 fn process(
     ctx: &Context,
     counters: &Counters,
@@ -548,12 +578,7 @@ fn process(
             // Each CPV keeps only how many clusters it lists; the lists are
             // counted per cluster here and computed again, a cell at a
             // time, by candidate generation.
-            let listable = Listable::new(ctx, &costs, &region);
-            let cuts: Vec<CpvCut> = problems
-                .iter()
-                .map(|vdi| cpv_cut(ctx, &costs, &listable, &region, vdi))
-                .collect();
-            let node_counts = cell_pair_counts(ctx, &costs, &listable, &cuts);
+            let (listable, cuts, node_counts) = cell_lists(ctx, &costs, &region, &problems);
             let cpvs = problems
                 .into_iter()
                 .zip(cuts)
@@ -583,20 +608,9 @@ fn process(
                 || process(ctx, counters, kd, r, &problems, levels),
             );
             a.cpvs.extend(b.cpvs);
-            let node_counts = match (a.node_counts.is_empty(), b.node_counts.is_empty()) {
-                (_, true) => a.node_counts,
-                (true, false) => b.node_counts,
-                (false, false) => {
-                    let mut sum = a.node_counts;
-                    for (x, y) in sum.iter_mut().zip(b.node_counts) {
-                        *x += y;
-                    }
-                    sum
-                }
-            };
             RegionResult {
                 cpvs: a.cpvs,
-                node_counts,
+                node_counts: sum_counts(a.node_counts, b.node_counts),
                 cones: cones + a.cones + b.cones,
                 regions: 1 + a.regions + b.regions,
                 refined: a.refined + b.refined,
@@ -687,33 +701,13 @@ pub fn restrict(
     let cells = ProblemViews::cells_of(&cpvs);
     let node_counts = cells
         .par_iter()
-        .fold(Vec::new, |mut sum: Vec<PairCounts>, r| {
+        .fold(Vec::new, |sum: Vec<PairCounts>, r| {
             let cell = &cpvs[r.start as usize..r.end as usize];
-            let node = &kd[cell[0].kd as usize];
-            let costs = RegionCosts::of_kd(ctx, node, counters);
-            let listable = Listable::new(ctx, &costs, &cell[0].region);
-            let cuts: Vec<CpvCut> = cell
-                .iter()
-                .map(|c| cpv_cut(ctx, &costs, &listable, &c.region, &c.vdi))
-                .collect();
-            let counts = cell_pair_counts(ctx, &costs, &listable, &cuts);
-            if sum.is_empty() {
-                return counts;
-            }
-            for (x, y) in sum.iter_mut().zip(counts) {
-                *x += y;
-            }
-            sum
+            let costs = RegionCosts::of_kd(ctx, &kd[cell[0].kd as usize], counters);
+            let vdis: Vec<Vdi> = cell.iter().map(|c| c.vdi).collect();
+            sum_counts(sum, cell_lists(ctx, &costs, &cell[0].region, &vdis).2)
         })
-        .reduce(Vec::new, |mut a, b| {
-            if a.is_empty() {
-                return b;
-            }
-            for (x, y) in a.iter_mut().zip(b) {
-                *x += y;
-            }
-            a
-        });
+        .reduce(Vec::new, sum_counts);
     ProblemViews {
         grid,
         kd,
