@@ -59,12 +59,32 @@ const MIN_EXCLUDED_HALF_ANGLE: f64 = 0.35;
 pub struct Enclosing {
     /// The cone (with its floor plane).
     pub cone: Cone,
-    /// `(n, h)`: the set lies in `n·x ≤ h`; unused when the cone is all of
-    /// space.
-    planes: [(DVec3, f64); SIDE_PLANES],
+    /// The side planes `n·x ≤ h`, by component; unused when the cone is
+    /// all of space.
+    sides: SidePlanes,
     /// Cones no view ray enters (one per frustum plane), when the VDI's
     /// frames are close enough for them to help.
     excluded: Option<[Cone; 4]>,
+}
+
+/// Side planes `(x, y, z)·p ≤ h` by component.
+#[derive(Clone, Copy, Debug, Default)]
+struct SidePlanes {
+    x: [f64; SIDE_PLANES],
+    y: [f64; SIDE_PLANES],
+    z: [f64; SIDE_PLANES],
+    h: [f64; SIDE_PLANES],
+}
+
+impl SidePlanes {
+    fn new(planes: &[(DVec3, f64); SIDE_PLANES]) -> SidePlanes {
+        SidePlanes {
+            x: planes.map(|(n, _)| n.x),
+            y: planes.map(|(n, _)| n.y),
+            z: planes.map(|(n, _)| n.z),
+            h: planes.map(|(_, h)| h),
+        }
+    }
 }
 
 /// Where a sphere lies with respect to an [`Enclosing`] set.
@@ -111,21 +131,26 @@ impl Enclosing {
         if self.cone.all {
             return (Overlap::Inside, 0);
         }
-        // Only the bounds of `mask` are visited (its set bits, in order):
-        // deep in a walk a sphere has few left to test.
+        // Only the bounds of `mask` count: deep in a walk a sphere has few
+        // left to test.
         let mut left = mask;
-        let mut m = mask & SIDE_MASK;
-        while m != 0 {
-            let k = m.trailing_zeros();
-            m &= m - 1;
-            let (n, h) = self.planes[k as usize];
-            let d = n.dot(c) - h;
-            if d > r {
+        let side = mask & SIDE_MASK;
+        if side != 0 {
+            // Every side plane at once, without branches (the loop
+            // vectorises, in the arithmetic of `n.dot(c) - h`), then only
+            // those of `mask` are read (less work than visiting the planes
+            // of `mask` one by one with a branch each).
+            let p = &self.sides;
+            let (mut beyond, mut within) = (0u32, 0u32);
+            for k in 0..SIDE_PLANES {
+                let d = p.x[k] * c.x + p.y[k] * c.y + p.z[k] * c.z - p.h[k];
+                beyond |= u32::from(d > r) << k;
+                within |= u32::from(d <= -r) << k;
+            }
+            if beyond & side != 0 {
                 return (Overlap::Outside, 0);
             }
-            if d <= -r {
-                left &= !(1 << k);
-            }
+            left &= !(within & side);
         }
         if mask & (1 << FLOOR_BIT) != 0 {
             let f = (c - self.cone.apex).dot(self.cone.axis) - self.cone.floor;
@@ -242,7 +267,7 @@ pub fn enclosing_cone(region: &Aabb, vdi: &Vdi, lens: &Lens) -> Enclosing {
     if gamma >= FRAC_PI_2 - 1e-9 {
         return Enclosing {
             cone: Cone::new(region.center(), axis, FRAC_PI_2),
-            planes: [(DVec3::ZERO, 0.0); SIDE_PLANES],
+            sides: SidePlanes::default(),
             excluded: None,
         };
     }
@@ -299,7 +324,60 @@ pub fn enclosing_cone(region: &Aabb, vdi: &Vdi, lens: &Lens) -> Enclosing {
     });
     Enclosing {
         cone,
-        planes,
+        sides: SidePlanes::new(&planes),
         excluded,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::math::rng::Rng;
+
+    /// A walk passes the bounds a sphere straddles down to the spheres
+    /// inside it: classifying a sphere inside another with those bounds
+    /// answers as testing every bound does.
+    #[test]
+    fn bounds_passed_down_answer_as_every_bound() {
+        let mut rng = Rng::new(5);
+        let lens = Lens {
+            fov_deg: 45.0,
+            aspect: 1.5,
+        };
+        let mut seen = [0usize; 3];
+        for _ in 0..200 {
+            let lo = rng.in_box(DVec3::splat(-50.0), DVec3::splat(50.0));
+            let ext = DVec3::new(
+                rng.range(1.0, 30.0),
+                rng.range(0.0, 5.0),
+                rng.range(1.0, 30.0),
+            );
+            let level = 2 + (rng.next_u64() % 3) as u8;
+            let n = 1u64 << level;
+            let vdi = Vdi {
+                face: (rng.next_u64() % 6) as u8,
+                level,
+                iu: (rng.next_u64() % n) as u32,
+                iv: (rng.next_u64() % n) as u32,
+            };
+            let set = enclosing_cone(&Aabb::new(lo, lo + ext), &vdi, &lens);
+            for _ in 0..200 {
+                let c = rng.in_box(DVec3::splat(-300.0), DVec3::splat(300.0));
+                let r = rng.range(1.0, 60.0);
+                let (overlap, left) = set.classify_within(c, r, set.all_bounds());
+                let cr = r * rng.range(0.0, 0.9);
+                let off = rng.in_box(DVec3::splat(-1.0), DVec3::splat(1.0));
+                let child = c + off.normalize_or_zero() * (r - cr) * rng.range(0.0, 0.99);
+                let full = set.classify(child, cr);
+                let passed = match overlap {
+                    Overlap::Outside => Overlap::Outside,
+                    Overlap::Inside => Overlap::Inside,
+                    Overlap::Partial => set.classify_within(child, cr, left).0,
+                };
+                assert_eq!(passed, full, "sphere {child} r {cr} in {c} r {r}");
+                seen[overlap as usize] += 1;
+            }
+        }
+        assert!(seen.iter().all(|&k| k > 100), "{seen:?}");
     }
 }
