@@ -32,9 +32,10 @@ pub struct PlaceArgs {
     /// Placement method (overrides the job's `method`).
     #[arg(long)]
     method: Option<MethodArg>,
-    /// Refuse the job when its predicted peak memory exceeds this many GB
-    /// (default: the memory available: what the machine has free, plus what
-    /// the process holds).
+    /// Memory the run may use, GB (default: the memory available: what the
+    /// machine has free, plus what the process holds). A job predicted to
+    /// need more is placed in tiles that fit; refused (exit 2) only where
+    /// none do.
     #[arg(long, value_name = "GB", value_parser = parse_gb)]
     max_memory_gb: Option<u64>,
 }
