@@ -1,6 +1,7 @@
 //! Writing outputs: atomically to files (temporary file, then rename), into
 //! devices and pipes as they are, or to standard output.
 
+use std::io::{BufWriter, Write};
 use std::path::Path;
 
 use optimizer::{Error, Result};
@@ -8,11 +9,22 @@ use optimizer::{Error, Result};
 /// Writes `bytes` to `path` atomically (temporary file + rename), or to
 /// standard output.
 pub fn write_output(path: Option<&Path>, bytes: &[u8]) -> Result<()> {
-    use std::io::Write;
+    write_with(path, |w| w.write_all(bytes))
+}
+
+/// Writes what `write` writes to `path` like [`write_output`], streamed
+/// through a buffer: a large output is never held whole in memory.
+pub fn write_with(
+    path: Option<&Path>,
+    write: impl FnOnce(&mut dyn Write) -> std::io::Result<()>,
+) -> Result<()> {
+    let buffered = |f: &mut dyn Write| {
+        let mut w = BufWriter::new(f);
+        write(&mut w)?;
+        w.flush()
+    };
     match path {
-        None => std::io::stdout()
-            .write_all(bytes)
-            .map_err(|e| Error::io("<stdout>", e)),
+        None => buffered(&mut std::io::stdout().lock()).map_err(|e| Error::io("<stdout>", e)),
         Some(p) => {
             // Through a symbolic link to its target; into anything that is
             // not a regular file (a device such as /dev/null, a pipe) write
@@ -23,7 +35,7 @@ pub fn write_output(path: Option<&Path>, bytes: &[u8]) -> Result<()> {
                 return std::fs::OpenOptions::new()
                     .append(true)
                     .open(p)
-                    .and_then(|mut f| f.write_all(bytes))
+                    .and_then(|mut f| buffered(&mut f))
                     .map_err(|e| Error::io(p, e));
             }
             let resolved = match std::fs::metadata(p) {
@@ -34,7 +46,7 @@ pub fn write_output(path: Option<&Path>, bytes: &[u8]) -> Result<()> {
                     return std::fs::OpenOptions::new()
                         .write(true)
                         .open(p)
-                        .and_then(|mut f| f.write_all(bytes))
+                        .and_then(|mut f| buffered(&mut f))
                         .map_err(|e| Error::io(p, e));
                 }
                 Ok(_) => std::fs::canonicalize(p).unwrap_or_else(|_| p.to_path_buf()),
@@ -69,7 +81,10 @@ pub fn write_output(path: Option<&Path>, bytes: &[u8]) -> Result<()> {
                 name.to_string_lossy(),
                 std::process::id()
             ));
-            std::fs::write(&tmp, bytes).map_err(|e| Error::io(p, e))?;
+            if let Err(e) = std::fs::File::create(&tmp).and_then(|mut f| buffered(&mut f)) {
+                let _ = std::fs::remove_file(&tmp);
+                return Err(Error::io(p, e));
+            }
             std::fs::rename(&tmp, p).map_err(|e| {
                 let _ = std::fs::remove_file(&tmp);
                 Error::io(p, e)
@@ -78,7 +93,12 @@ pub fn write_output(path: Option<&Path>, bytes: &[u8]) -> Result<()> {
     }
 }
 
-/// `value` as the tool's JSON bytes, written like [`write_output`].
+/// `value` as the tool's JSON bytes ([`optimizer::to_json_bytes`]),
+/// written like [`write_output`] but streamed: a placement of many
+/// gigabytes is not held a second time as text.
 pub fn write_json(path: Option<&Path>, value: &impl serde::Serialize) -> Result<()> {
-    write_output(path, &optimizer::to_json_bytes(value)?)
+    write_with(path, |w| {
+        serde_json::to_writer_pretty(&mut *w, value)?;
+        w.write_all(b"\n")
+    })
 }

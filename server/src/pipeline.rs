@@ -131,7 +131,7 @@ pub(crate) fn merge_job(
             })?;
             parts.push(p);
         }
-        let placement = optimizer::place::tiles::merge(prepared.job(), parts.iter())?;
+        let placement = optimizer::place::tiles::merge(prepared.job(), parts)?;
         let stats = optimizer::api::stats::Stats {
             cpvs: placement.summary.cpvs,
             impostors: placement.summary.impostors,

@@ -96,7 +96,6 @@ impl Prepared<'_> {
             // The next tile's memory check reads what the process holds.
             crate::place::release_memory();
         }
-        let placement = merge(self.job(), outs.iter().map(|(_, o)| &o.placement))?;
         let mut stats = Stats::default();
         for (t, o) in &outs {
             stats.add_tile(&o.stats);
@@ -111,6 +110,7 @@ impl Prepared<'_> {
             });
         }
         stats.seconds.retain(|s| s.seconds > 0.0);
+        let placement = merge(self.job(), outs.into_iter().map(|(_, o)| o.placement))?;
         stats.impostors = placement.summary.impostors;
         stats.memory_bytes = placement.summary.memory_bytes;
         stats.unsolved_cpvs = placement.summary.unsolved_cpvs;
@@ -119,8 +119,10 @@ impl Prepared<'_> {
 }
 
 /// The placements of a job's tiles as one: CPVs in tile order, impostors in
-/// order of first use, each distinct one once.
-pub fn merge<'p>(job: &Job, parts: impl Iterator<Item = &'p Placement>) -> Result<Placement> {
+/// order of first use, each distinct one once. The parts are moved, not
+/// copied: on a large job their CPVs' impostor lists are most of what the
+/// run holds at its end.
+pub fn merge(job: &Job, parts: impl IntoIterator<Item = Placement>) -> Result<Placement> {
     let mut impostors = Vec::new();
     let mut cpvs = Vec::new();
     let mut seen: HashMap<String, u32> = HashMap::new();
@@ -137,25 +139,24 @@ pub fn merge<'p>(job: &Job, parts: impl Iterator<Item = &'p Placement>) -> Resul
     };
     for p in parts {
         let mut ids = Vec::with_capacity(p.impostors.len());
-        for imp in &p.impostors {
-            let mut key = imp.clone();
-            key.id = 0;
-            let key = serde_json::to_string(&key)
+        for mut imp in p.impostors {
+            imp.id = 0;
+            let key = serde_json::to_string(&imp)
                 .map_err(|e| Error::Internal(format!("an impostor's key: {e}")))?;
             let next = impostors.len() as u32;
             let id = *seen.entry(key).or_insert_with(|| {
-                let mut i = imp.clone();
-                i.id = next;
-                summary.memory_bytes += i.memory_bytes;
-                impostors.push(i);
+                imp.id = next;
+                summary.memory_bytes += imp.memory_bytes;
+                impostors.push(imp);
                 next
             });
             ids.push(id);
         }
-        for c in &p.cpvs {
-            let mut c = c.clone();
+        for mut c in p.cpvs {
             c.id = cpvs.len() as u32;
-            c.impostors = c.impostors.iter().map(|&j| ids[j as usize]).collect();
+            for j in &mut c.impostors {
+                *j = ids[*j as usize];
+            }
             c.impostors.sort_unstable();
             c.impostors.dedup();
             cpvs.push(c);
@@ -368,7 +369,7 @@ mod tests {
             vec![imp(3, 5.0), imp(9, 0.0)],
             vec![cpv(2.0, vec![1, 0], true), cpv(3.0, vec![1], false)],
         );
-        let m = merge(&j, [&a, &b].into_iter()).unwrap();
+        let m = merge(&j, [a.clone(), b]).unwrap();
         let nodes: Vec<u32> = m.impostors.iter().map(|i| i.node).collect();
         assert_eq!(nodes, [7, 9, 3]);
         assert!(
@@ -393,7 +394,7 @@ mod tests {
             max: [2.0, 1.0, 1.0],
         };
         let c = placement(vec![other], vec![cpv(4.0, vec![0], true)]);
-        let m = merge(&j, [&a, &c].into_iter()).unwrap();
+        let m = merge(&j, [a, c]).unwrap();
         assert_eq!(m.summary.impostors, 3);
     }
 }
