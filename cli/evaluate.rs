@@ -8,7 +8,7 @@ use clap::Args;
 use optimizer::api::placement::Placement;
 use optimizer::evaluate::EvalOptions;
 use optimizer::evaluate::images::{ImageOptions, LayerSource, MAX_IMAGE_VIEWS};
-use optimizer::files::{MAX_LOCAL_PLACEMENT_BYTES, MAX_SCENE_BYTES, open_file, read_file, too_big};
+use optimizer::files::{MAX_LOCAL_PLACEMENT_BYTES, MAX_SCENE_BYTES, read_file, read_json};
 use optimizer::input::GeometryUse;
 use optimizer::{Error, Result};
 
@@ -64,26 +64,7 @@ pub struct EvaluateArgs {
 
 /// Reads a placement file, parsing it as it is read.
 pub fn read_placement(path: &std::path::Path) -> Result<Placement> {
-    let what = "placement";
-    let (file, _) = open_file(path, MAX_LOCAL_PLACEMENT_BYTES, what)?;
-    let mut reader = std::io::BufReader::new(file);
-    let parsed = serde_json::from_reader(&mut reader);
-    // A pipe that yields more than the limit is cut there, so its JSON
-    // ends early: name the size rather than the truncation.
-    if reader.get_ref().limit() == 0 {
-        return Err(too_big(
-            path,
-            MAX_LOCAL_PLACEMENT_BYTES + 1,
-            MAX_LOCAL_PLACEMENT_BYTES,
-            what,
-        ));
-    }
-    parsed.map_err(|e| {
-        Error::bad(
-            path.display().to_string(),
-            format!("invalid placement JSON: {e}"),
-        )
-    })
+    read_json(path, MAX_LOCAL_PLACEMENT_BYTES, "placement")
 }
 
 pub fn run(a: EvaluateArgs) -> Result<ExitCode> {

@@ -93,12 +93,9 @@ pub fn write_with(
     }
 }
 
-/// `value` as the tool's JSON bytes ([`optimizer::to_json_bytes`]),
+/// `value` as the tool's JSON bytes ([`optimizer::files::write_json`]),
 /// written like [`write_output`] but streamed: a placement of many
 /// gigabytes is not held a second time as text.
 pub fn write_json(path: Option<&Path>, value: &impl serde::Serialize) -> Result<()> {
-    write_with(path, |w| {
-        serde_json::to_writer_pretty(&mut *w, value)?;
-        w.write_all(b"\n")
-    })
+    write_with(path, |w| optimizer::files::write_json(w, value))
 }

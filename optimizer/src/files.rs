@@ -1,9 +1,10 @@
 //! Reading input files within stated limits: regular files and pipes (a
 //! link is followed, but never to a device or directory: `/dev/zero` would
 //! read until memory runs out), and never more bytes than the kind of file
-//! may have, checked before and while reading.
+//! may have, checked before and while reading; and the byte format of the
+//! JSON files the tool writes.
 
-use std::io::Read;
+use std::io::{Read, Write};
 use std::path::Path;
 
 use crate::{Error, Result};
@@ -42,12 +43,38 @@ pub fn read_file(path: &Path, limit: u64, what: &str) -> Result<Vec<u8>> {
     Ok(bytes)
 }
 
-/// The file at `path` opened for reading, as [`read_file`] checks it
-/// (`what` names its kind in errors), yielding at most one byte more than
-/// `limit` (a reader that gets more than `limit` bytes must refuse the
-/// file: [`too_big`]), and its length when it is a regular file. For
-/// inputs parsed as they are read, never held whole.
-pub fn open_file(
+/// The JSON file at `path` (`what` names its kind in errors), at most
+/// `limit` bytes, parsed as it is read: never held whole as text.
+pub fn read_json<T: serde::de::DeserializeOwned>(path: &Path, limit: u64, what: &str) -> Result<T> {
+    let (file, _) = open_file(path, limit, what)?;
+    let mut reader = std::io::BufReader::new(file);
+    let parsed = serde_json::from_reader(&mut reader);
+    // A pipe that yields more than the limit is cut there, so its JSON
+    // ends early: name the size rather than the truncation.
+    if reader.get_ref().limit() == 0 {
+        return Err(too_big(path, limit + 1, limit, what));
+    }
+    parsed.map_err(|e| {
+        Error::bad(
+            path.display().to_string(),
+            format!("invalid {what} JSON: {e}"),
+        )
+    })
+}
+
+/// `value` as pretty-printed JSON with a final newline, written to `w`:
+/// the byte format of every JSON file the tool writes (the CLI and the
+/// HTTP service share it, so the same placement has the same bytes
+/// through either).
+pub fn write_json(mut w: impl Write, value: &impl serde::Serialize) -> std::io::Result<()> {
+    serde_json::to_writer_pretty(&mut w, value)?;
+    w.write_all(b"\n")
+}
+
+/// The file at `path` opened for reading, as [`read_file`] checks it,
+/// yielding at most one byte more than `limit` (a reader that gets more
+/// must refuse the file), and its length when it is a regular file.
+fn open_file(
     path: &Path,
     limit: u64,
     what: &str,
@@ -72,7 +99,7 @@ pub fn open_file(
 }
 
 /// The error for a file of `n` bytes or more, above `limit`.
-pub fn too_big(path: &Path, n: u64, limit: u64, what: &str) -> Error {
+fn too_big(path: &Path, n: u64, limit: u64, what: &str) -> Error {
     Error::bad(
         path.display().to_string(),
         format!("{n} bytes or more: a {what} may have at most {limit} bytes"),

@@ -35,12 +35,11 @@ pub mod visibility;
 
 pub use error::{Error, Result};
 
-/// Pretty-printed JSON with a final newline: the byte format of every JSON
-/// file the tool writes (the CLI and the HTTP service share it, so the same
-/// placement has the same bytes through either).
+/// `value` in the byte format of every JSON file the tool writes
+/// ([`files::write_json`]), in memory.
 pub fn to_json_bytes(value: &impl serde::Serialize) -> Result<Vec<u8>> {
-    let mut v = serde_json::to_vec_pretty(value).map_err(|e| Error::Internal(e.to_string()))?;
-    v.push(b'\n');
+    let mut v = Vec::new();
+    files::write_json(&mut v, value).map_err(|e| Error::Internal(e.to_string()))?;
     Ok(v)
 }
 
