@@ -170,4 +170,43 @@ mod tests {
         }
         std::fs::remove_dir_all(&dir).unwrap();
     }
+
+    /// A JSON file is parsed as it is read, within its limit; one a pipe
+    /// yields past the limit is refused for its size, not as cut JSON.
+    #[test]
+    fn json_files_are_parsed_within_the_limit() {
+        let dir = std::env::temp_dir().join(format!("files-json-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let p = dir.join("p.json");
+        std::fs::write(&p, b"[1, 2, 3]").unwrap();
+        assert_eq!(
+            read_json::<Vec<u32>>(&p, 9, "placement").unwrap(),
+            [1, 2, 3]
+        );
+        let e = message(read_json::<Vec<u32>>(&p, 8, "placement").unwrap_err());
+        assert!(e.contains("at most 8 bytes"), "{e}");
+        std::fs::write(&p, b"[1, 2").unwrap();
+        let e = message(read_json::<Vec<u32>>(&p, 100, "placement").unwrap_err());
+        assert!(e.contains("invalid placement JSON"), "{e}");
+        #[cfg(unix)]
+        {
+            let fifo = dir.join("p.fifo");
+            let made = std::process::Command::new("mkfifo").arg(&fifo).status();
+            if made.is_ok_and(|s| s.success()) {
+                let text = format!("[{}0]", "0,".repeat(999));
+                let w = {
+                    let fifo = fifo.clone();
+                    std::thread::spawn(move || {
+                        let mut f = std::fs::OpenOptions::new().write(true).open(fifo).unwrap();
+                        // The reader stops at its limit: a broken pipe is fine.
+                        let _ = f.write_all(text.as_bytes());
+                    })
+                };
+                let e = message(read_json::<Vec<u32>>(&fifo, 1000, "placement").unwrap_err());
+                assert!(e.contains("at most 1000 bytes"), "{e}");
+                w.join().unwrap();
+            }
+        }
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
 }
