@@ -65,10 +65,171 @@ pub fn read_json<T: serde::de::DeserializeOwned>(path: &Path, limit: u64, what: 
 /// `value` as pretty-printed JSON with a final newline, written to `w`:
 /// the byte format of every JSON file the tool writes (the CLI and the
 /// HTTP service share it, so the same placement has the same bytes
-/// through either).
+/// through either). Objects are indented as `serde_json`'s pretty printer
+/// does; an array of numbers, strings or booleans is written on one line
+/// (`[0.0, 1.5, 0.0]`), so a placement's per-CPV impostor lists take one
+/// line each instead of one line per id (a third of the bytes).
 pub fn write_json(mut w: impl Write, value: &impl serde::Serialize) -> std::io::Result<()> {
-    serde_json::to_writer_pretty(&mut w, value)?;
+    let mut ser = serde_json::Serializer::with_formatter(&mut w, Layout::default());
+    value.serialize(&mut ser)?;
     w.write_all(b"\n")
+}
+
+/// How an open array or object of [`Layout`] is laid out.
+#[derive(Clone, Copy, PartialEq, Eq)]
+enum Open {
+    /// An array whose first element has not been written yet.
+    Array,
+    /// An array of scalars: on one line.
+    Line,
+    /// An array of arrays or objects: one element per line.
+    Block,
+    /// An object; `true` once it has a member.
+    Object(bool),
+}
+
+/// The formatter of [`write_json`]: `serde_json`'s pretty layout (two
+/// spaces per level), except that an array whose first element is a scalar
+/// stays on one line.
+#[derive(Default)]
+struct Layout {
+    open: Vec<Open>,
+    /// Set between `begin_array_value` and the value it announces: whether
+    /// that value is its array's first.
+    element: Option<bool>,
+}
+
+impl Layout {
+    fn newline<W: ?Sized + Write>(&self, w: &mut W) -> std::io::Result<()> {
+        w.write_all(b"\n")?;
+        for _ in 0..self.open.len() {
+            w.write_all(b"  ")?;
+        }
+        Ok(())
+    }
+
+    /// Called before every value: an array's element decides, if it is the
+    /// first, how its array is laid out, and is separated accordingly.
+    fn value<W: ?Sized + Write>(&mut self, w: &mut W, scalar: bool) -> std::io::Result<()> {
+        let Some(first) = self.element.take() else {
+            return Ok(());
+        };
+        let top = self.open.last_mut().expect("an element is inside an array");
+        if *top == Open::Array {
+            *top = if scalar { Open::Line } else { Open::Block };
+        }
+        match *top {
+            Open::Line => {
+                if !first {
+                    w.write_all(b", ")?;
+                }
+                Ok(())
+            }
+            _ => {
+                if !first {
+                    w.write_all(b",")?;
+                }
+                self.newline(w)
+            }
+        }
+    }
+}
+
+/// Scalars: separated as an element, then written as `serde_json` writes them.
+macro_rules! scalar {
+    ($($name:ident($t:ty)),* $(,)?) => {$(
+        fn $name<W: ?Sized + Write>(&mut self, w: &mut W, v: $t) -> std::io::Result<()> {
+            self.value(w, true)?;
+            serde_json::ser::CompactFormatter.$name(w, v)
+        }
+    )*};
+}
+
+impl serde_json::ser::Formatter for Layout {
+    scalar!(
+        write_bool(bool),
+        write_i8(i8),
+        write_i16(i16),
+        write_i32(i32),
+        write_i64(i64),
+        write_i128(i128),
+        write_u8(u8),
+        write_u16(u16),
+        write_u32(u32),
+        write_u64(u64),
+        write_u128(u128),
+        write_f32(f32),
+        write_f64(f64),
+        write_number_str(&str),
+        write_raw_fragment(&str),
+    );
+
+    fn write_null<W: ?Sized + Write>(&mut self, w: &mut W) -> std::io::Result<()> {
+        self.value(w, true)?;
+        w.write_all(b"null")
+    }
+
+    fn begin_string<W: ?Sized + Write>(&mut self, w: &mut W) -> std::io::Result<()> {
+        self.value(w, true)?;
+        w.write_all(b"\"")
+    }
+
+    fn begin_array<W: ?Sized + Write>(&mut self, w: &mut W) -> std::io::Result<()> {
+        self.value(w, false)?;
+        self.open.push(Open::Array);
+        w.write_all(b"[")
+    }
+
+    fn begin_array_value<W: ?Sized + Write>(
+        &mut self,
+        _: &mut W,
+        first: bool,
+    ) -> std::io::Result<()> {
+        self.element = Some(first);
+        Ok(())
+    }
+
+    fn end_array_value<W: ?Sized + Write>(&mut self, _: &mut W) -> std::io::Result<()> {
+        Ok(())
+    }
+
+    fn end_array<W: ?Sized + Write>(&mut self, w: &mut W) -> std::io::Result<()> {
+        if self.open.pop() == Some(Open::Block) {
+            self.newline(w)?;
+        }
+        w.write_all(b"]")
+    }
+
+    fn begin_object<W: ?Sized + Write>(&mut self, w: &mut W) -> std::io::Result<()> {
+        self.value(w, false)?;
+        self.open.push(Open::Object(false));
+        w.write_all(b"{")
+    }
+
+    fn begin_object_key<W: ?Sized + Write>(
+        &mut self,
+        w: &mut W,
+        first: bool,
+    ) -> std::io::Result<()> {
+        if let Some(top) = self.open.last_mut() {
+            *top = Open::Object(true);
+        }
+        if !first {
+            w.write_all(b",")?;
+        }
+        self.newline(w)
+    }
+
+    fn begin_object_value<W: ?Sized + Write>(&mut self, w: &mut W) -> std::io::Result<()> {
+        w.write_all(b": ")
+    }
+
+    fn end_object<W: ?Sized + Write>(&mut self, w: &mut W) -> std::io::Result<()> {
+        if self.open.pop() == Some(Open::Object(true)) {
+            self.newline(w)?;
+        }
+        w.write_all(b"}")
+    }
 }
 
 /// The file at `path` opened for reading, as [`read_file`] checks it,
@@ -123,6 +284,53 @@ mod tests {
     fn message(e: Error) -> String {
         assert!(e.is_bad_input(), "{e}");
         e.to_string()
+    }
+
+    #[test]
+    fn json_is_indented_with_scalar_arrays_on_one_line() {
+        let value = serde_json::json!({
+            "cpvs": [
+                {"id": 0, "impostors": [3, 17, 250], "region": {"min": [0.0, 1.5, -2.25]}},
+                {"id": 1, "impostors": [], "solved": true, "reason": null}
+            ],
+            "names": ["a", "b\"c"],
+            "nested": [[1, 2], [], [{}]],
+            "empty": {}
+        });
+        let mut bytes = Vec::new();
+        write_json(&mut bytes, &value).unwrap();
+        let text = String::from_utf8(bytes).unwrap();
+        let want = r#"{
+  "cpvs": [
+    {
+      "id": 0,
+      "impostors": [3, 17, 250],
+      "region": {
+        "min": [0.0, 1.5, -2.25]
+      }
+    },
+    {
+      "id": 1,
+      "impostors": [],
+      "reason": null,
+      "solved": true
+    }
+  ],
+  "empty": {},
+  "names": ["a", "b\"c"],
+  "nested": [
+    [1, 2],
+    [],
+    [
+      {}
+    ]
+  ]
+}
+"#;
+        assert_eq!(text, want);
+        // The same value as serde_json reads it back.
+        let back: serde_json::Value = serde_json::from_str(&text).unwrap();
+        assert_eq!(back, value);
     }
 
     #[test]
