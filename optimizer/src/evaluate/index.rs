@@ -6,7 +6,7 @@ use std::collections::HashMap;
 use glam::DVec3;
 
 use crate::api::job::Job;
-use crate::api::placement::Placement;
+use crate::api::placement::{PlacedImpostor, Placement};
 use crate::error::{Error, Result};
 use crate::math::geom::{Aabb, Sphere, Vdi, face_direction};
 use crate::math::grid::Grid;
@@ -22,12 +22,14 @@ pub(super) struct IndexedImpostor {
 
 /// A placement checked against its scene and job, with the lookups a
 /// view needs: its problem view, and that view's impostors and the objects
-/// they replace.
-pub(super) struct PlacementIndex {
+/// they replace. The CPVs' impostor lists are the placement's own, read
+/// where they are (a large placement lists hundreds of millions of ids).
+pub(super) struct PlacementIndex<'p> {
     pub(super) impostors: Vec<IndexedImpostor>,
-    /// Per CPV: sorted represented object ids and the impostor ids.
-    cpv_replaced: Vec<Vec<u32>>,
-    cpv_impostors: Vec<Vec<u32>>,
+    /// The placement's impostors, for the objects each replaces.
+    placed: &'p [PlacedImpostor],
+    /// Per CPV: the impostor ids.
+    cpv_impostors: Vec<&'p [u32]>,
     /// Per CPV: solved (its final time within the target).
     pub(super) cpv_solved: Vec<bool>,
     /// Per CPV: its region (its cell, or the part of it where its views may
@@ -39,15 +41,15 @@ pub(super) struct PlacementIndex {
     level: u8,
 }
 
-impl PlacementIndex {
+impl<'p> PlacementIndex<'p> {
     /// Checks that the placement refers to the scene and the job (`source`
     /// names it in errors) and builds the lookups.
     pub(super) fn new(
         scene: &Scene,
         job: &Job,
-        placement: &Placement,
+        placement: &'p Placement,
         source: &str,
-    ) -> Result<PlacementIndex> {
+    ) -> Result<PlacementIndex<'p>> {
         placement.validate(scene, source)?;
         let mut impostors = Vec::with_capacity(placement.impostors.len());
         for imp in &placement.impostors {
@@ -65,7 +67,6 @@ impl PlacementIndex {
         let grid = job.grid();
         let level = leaf_level(job.problem_views.min_vdi_deg);
         let mut lookup = HashMap::with_capacity(placement.cpvs.len());
-        let mut cpv_replaced = Vec::with_capacity(placement.cpvs.len());
         let mut cpv_impostors = Vec::with_capacity(placement.cpvs.len());
         let mut cpv_solved = Vec::with_capacity(placement.cpvs.len());
         let mut cpv_region = Vec::with_capacity(placement.cpvs.len());
@@ -112,20 +113,13 @@ impl PlacementIndex {
             if lookup.insert((grid.linear(cell), vdi), k as u32).is_some() {
                 return Err(Error::bad(&what, "duplicate CPV"));
             }
-            let mut replaced: Vec<u32> = c
-                .impostors
-                .iter()
-                .flat_map(|&i| placement.impostors[i as usize].objects.iter().copied())
-                .collect();
-            replaced.sort_unstable();
-            cpv_replaced.push(replaced);
-            cpv_impostors.push(c.impostors.clone());
+            cpv_impostors.push(&c.impostors[..]);
             cpv_solved.push(c.time_ms_final <= job.target_frame_time_ms && c.solved);
             cpv_region.push(region);
         }
         Ok(PlacementIndex {
             impostors,
-            cpv_replaced,
+            placed: &placement.impostors,
             cpv_impostors,
             cpv_solved,
             cpv_region,
@@ -136,23 +130,29 @@ impl PlacementIndex {
     }
 
     /// The CPV of a view (its eye, the eye's cell and the direction), with
-    /// the objects its impostors replace and the impostors; empty lists
-    /// outside CPVs (including the parts of a cell outside its CPVs'
+    /// the objects its impostors replace (sorted) and the impostors; empty
+    /// lists outside CPVs (including the parts of a cell outside its CPVs'
     /// regions, where no view exceeds the target).
     pub(super) fn view_cpv(
         &self,
         eye: DVec3,
         cell: [u32; 3],
         dir: DVec3,
-    ) -> (Option<u32>, &[u32], &[u32]) {
+    ) -> (Option<u32>, Vec<u32>, &'p [u32]) {
         let vdi = Vdi::containing(dir, self.level);
         match self.lookup.get(&(self.grid.linear(cell), vdi)).copied() {
-            Some(c) if self.cpv_region[c as usize].contains_point(eye) => (
-                Some(c),
-                &self.cpv_replaced[c as usize],
-                &self.cpv_impostors[c as usize],
-            ),
-            _ => (None, &[], &[]),
+            Some(c) if self.cpv_region[c as usize].contains_point(eye) => {
+                let imps = self.cpv_impostors[c as usize];
+                // Gathered for this view only: held for every CPV at once,
+                // the replaced objects took several times the placement.
+                let mut replaced: Vec<u32> = imps
+                    .iter()
+                    .flat_map(|&i| self.placed[i as usize].objects.iter().copied())
+                    .collect();
+                replaced.sort_unstable();
+                (Some(c), replaced, imps)
+            }
+            _ => (None, Vec::new(), &[]),
         }
     }
 }

@@ -122,7 +122,7 @@ struct ViewResult {
 /// What every sampled view is measured with.
 struct Viewer<'p> {
     prepared: &'p Prepared<'p>,
-    index: PlacementIndex,
+    index: PlacementIndex<'p>,
     model: CostModel,
     aspect: f64,
     visibility: Option<&'p Visibility<'p>>,
@@ -156,7 +156,7 @@ impl Viewer<'_> {
             h,
             &self.model,
             &f,
-            replaced,
+            &replaced,
             imps,
             index,
             set.map(|s| &**s),

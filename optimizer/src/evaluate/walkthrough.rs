@@ -134,7 +134,7 @@ impl Prepared<'_> {
             let (cpv, replaced, imps) = if with {
                 index.view_cpv(eye, cell, dir)
             } else {
-                (None, &[][..], &[][..])
+                (None, Vec::new(), &[][..])
             };
             let set = self.visibility().map(|v| &v.cell(cell).set);
             let t = view_time(
@@ -142,7 +142,7 @@ impl Prepared<'_> {
                 self.hierarchy(),
                 &model,
                 &f,
-                replaced,
+                &replaced,
                 imps,
                 &index,
                 set.map(|s| &**s),
