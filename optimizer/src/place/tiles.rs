@@ -92,29 +92,96 @@ impl Prepared<'_> {
                 whole,
                 whole.is_some(),
             )?;
-            outs.push((t, out));
+            // Held packed until the merge: a finished tile's CPV lists
+            // would otherwise add to every later tile's peak.
+            outs.push((t, out.stats, Packed::pack(out.placement)));
             // The next tile's memory check reads what the process holds.
             crate::place::release_memory();
         }
         let mut stats = Stats::default();
-        for (t, o) in &outs {
-            stats.add_tile(&o.stats);
+        for (t, o, p) in &outs {
+            let summary = &p.placement.summary;
+            stats.add_tile(o);
             stats.tiles.push(TileStats {
                 min: t.view_space.min,
                 max: t.view_space.max,
-                cpvs: o.placement.summary.cpvs,
-                impostors: o.placement.summary.impostors,
-                memory_bytes: o.placement.summary.memory_bytes,
-                seconds: o.stats.seconds.iter().map(|s| s.seconds).sum(),
-                peak_rss_bytes: o.stats.peak_rss_bytes,
+                cpvs: summary.cpvs,
+                impostors: summary.impostors,
+                memory_bytes: summary.memory_bytes,
+                seconds: o.seconds.iter().map(|s| s.seconds).sum(),
+                peak_rss_bytes: o.peak_rss_bytes,
             });
         }
         stats.seconds.retain(|s| s.seconds > 0.0);
-        let placement = merge(self.job(), outs.into_iter().map(|(_, o)| o.placement))?;
+        let placement = merge(self.job(), outs.into_iter().map(|(_, _, p)| p.unpack()))?;
         stats.impostors = placement.summary.impostors;
         stats.memory_bytes = placement.summary.memory_bytes;
         stats.unsolved_cpvs = placement.summary.unsolved_cpvs;
         Ok(PlaceOutput { placement, stats })
+    }
+}
+
+/// A placement whose CPVs' impostor lists are packed into one buffer, each
+/// sorted and written as the gaps between its ids, seven bits a byte
+/// (LEB128): about a byte an id where a CPV draws many of the tile's
+/// impostors, instead of four. [`merge`] sorts the lists anyway.
+struct Packed {
+    /// The placement with every CPV's list emptied.
+    placement: Placement,
+    lists: Vec<u8>,
+    /// Where each CPV's list ends in `lists`.
+    ends: Vec<usize>,
+}
+
+impl Packed {
+    fn pack(mut placement: Placement) -> Packed {
+        let mut lists = Vec::new();
+        let mut ends = Vec::with_capacity(placement.cpvs.len());
+        for c in &mut placement.cpvs {
+            let mut ids = std::mem::take(&mut c.impostors);
+            ids.sort_unstable();
+            let mut last = 0u32;
+            for id in ids {
+                let mut gap = id - last;
+                last = id;
+                while gap >= 0x80 {
+                    lists.push((gap & 0x7f) as u8 | 0x80);
+                    gap >>= 7;
+                }
+                lists.push(gap as u8);
+            }
+            ends.push(lists.len());
+        }
+        lists.shrink_to_fit();
+        Packed {
+            placement,
+            lists,
+            ends,
+        }
+    }
+
+    fn unpack(self) -> Placement {
+        let Packed {
+            mut placement,
+            lists,
+            ends,
+        } = self;
+        let mut start = 0;
+        for (c, end) in placement.cpvs.iter_mut().zip(ends) {
+            let (mut last, mut gap, mut shift) = (0u32, 0u32, 0);
+            for &b in &lists[start..end] {
+                gap |= u32::from(b & 0x7f) << shift;
+                if b & 0x80 != 0 {
+                    shift += 7;
+                } else {
+                    last += gap;
+                    c.impostors.push(last);
+                    (gap, shift) = (0, 0);
+                }
+            }
+            start = end;
+        }
+        placement
     }
 }
 
@@ -351,6 +418,35 @@ mod tests {
             x.id = i as u32;
         }
         p
+    }
+
+    /// Packed lists come back as they went in, sorted: empty lists, ids
+    /// of every width (gaps of one to five bytes), duplicates kept.
+    #[test]
+    fn packed_lists_unpack_to_the_sorted_lists() {
+        let lists = [
+            vec![5, 0, 3],
+            vec![],
+            vec![u32::MAX, 127, 128, 16_383, 16_384, 2_097_152, 0],
+            vec![7, 7],
+            vec![300],
+        ];
+        let cpvs = lists
+            .iter()
+            .enumerate()
+            .map(|(k, l)| cpv(k as f64, l.clone(), true))
+            .collect();
+        let p = placement(vec![imp(1, 0.0)], cpvs);
+        let packed = Packed::pack(p.clone());
+        // Gaps below 128 take a byte; the third list's gaps 0, 127, 1,
+        // 16,255, 1, 2,080,768 and 4,292,870,143 take 1, 1, 1, 2, 1, 3, 5.
+        assert_eq!(packed.lists.len(), 3 + 14 + 2 + 2);
+        let back = packed.unpack();
+        let mut want = p;
+        for c in &mut want.cpvs {
+            c.impostors.sort_unstable();
+        }
+        assert_eq!(back, want);
     }
 
     /// Merging: CPVs in tile order with new ids, an impostor both tiles
