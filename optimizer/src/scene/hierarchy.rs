@@ -47,6 +47,8 @@ pub struct Hierarchy {
     pub order: Vec<u32>,
     /// Bounding sphere of each object, indexed by object id.
     pub object_spheres: Vec<Sphere>,
+    /// The leaf cluster of each object, indexed by object id.
+    pub leaf_of: Vec<u32>,
 }
 
 impl Hierarchy {
@@ -192,10 +194,19 @@ impl Hierarchy {
             n.draw_calls = calls;
             n.triangles = tris;
         }
+        let mut leaf_of = vec![0u32; order.len()];
+        for (id, n) in nodes.iter().enumerate() {
+            if n.children.is_none() {
+                for &o in &order[n.objects.0 as usize..n.objects.1 as usize] {
+                    leaf_of[o as usize] = id as u32;
+                }
+            }
+        }
         Hierarchy {
             nodes,
             order,
             object_spheres,
+            leaf_of,
         }
     }
 

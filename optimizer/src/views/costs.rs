@@ -7,6 +7,7 @@ use std::collections::VecDeque;
 use crate::math::enclosing::{Bounds, Enclosing, Overlap, enclosing_cone};
 use crate::math::geom::{Aabb, Vdi};
 use crate::model::cost::Cost;
+use crate::scene::hierarchy::Hierarchy;
 use crate::views::KdNode;
 use crate::views::context::{Context, Counters};
 use crate::visibility::ObjectSet;
@@ -19,6 +20,73 @@ pub struct RegionCosts {
     pub objects: Vec<Cost>,
     /// Per node id.
     pub nodes: Vec<Cost>,
+    /// Per node id, the node an early-exit walk tests in its place: the
+    /// node itself, or, where one of its children costs nothing from the
+    /// region (e.g. outside the visible set), what the other child tests.
+    /// Its cost is the node's, and its sphere lies inside the node's, so
+    /// the walk sums the same costs with fewer sphere tests.
+    pub down: Vec<u32>,
+    /// With a visible set: the entries set (visible objects, the clusters
+    /// above them), cleared again when the buffers go back to [`POOL`].
+    sparse: Option<Sparse>,
+}
+
+/// What a [`RegionCosts`] of a visible set set in its buffers.
+struct Sparse {
+    objects: Vec<u32>,
+    nodes: Vec<u32>,
+    /// Per node id: in `nodes` (all false again once back in the pool).
+    marked: Vec<bool>,
+}
+
+/// Buffers of [`RegionCosts`] for visible sets, all entries zero (`down`
+/// the identity, nothing marked): a region sees a small part of a large
+/// scene, so it sets and clears only that part instead of allocating and
+/// summing every object and cluster. Shared by every job in the process;
+/// a buffer of another scene's sizes is not taken, and at most
+/// [`POOL_BUFFERS`] are kept.
+static POOL: std::sync::Mutex<Vec<Buffers>> = std::sync::Mutex::new(Vec::new());
+
+/// A [`RegionCosts`]'s buffers in the [`POOL`].
+struct Buffers {
+    objects: Vec<Cost>,
+    nodes: Vec<Cost>,
+    down: Vec<u32>,
+    sparse: Sparse,
+}
+
+/// Buffers kept in [`POOL`] (a few per worker thread).
+const POOL_BUFFERS: usize = 16;
+
+impl Drop for RegionCosts {
+    fn drop(&mut self) {
+        let Some(mut sp) = self.sparse.take() else {
+            return;
+        };
+        for &o in &sp.objects {
+            self.objects[o as usize] = Cost::default();
+        }
+        for &n in &sp.nodes {
+            self.nodes[n as usize] = Cost::default();
+            self.down[n as usize] = n;
+            sp.marked[n as usize] = false;
+        }
+        sp.objects.clear();
+        sp.nodes.clear();
+        let buffers = Buffers {
+            objects: std::mem::take(&mut self.objects),
+            nodes: std::mem::take(&mut self.nodes),
+            down: std::mem::take(&mut self.down),
+            sparse: sp,
+        };
+        let mut pool = POOL
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner);
+        if pool.len() >= POOL_BUFFERS {
+            pool.remove(0);
+        }
+        pool.push(buffers);
+    }
 }
 
 impl RegionCosts {
@@ -31,39 +99,107 @@ impl RegionCosts {
         visible: Option<&ObjectSet>,
         counters: &Counters,
     ) -> RegionCosts {
-        let objects: Vec<Cost> = ctx
-            .scene
-            .objects
-            .iter()
-            .zip(&ctx.hierarchy.object_spheres)
-            .enumerate()
-            .map(|(id, (o, s))| {
-                if visible.is_some_and(|v| !v.contains(id as u32)) {
-                    return Cost::default();
-                }
-                let d = region.distance_to_point(s.center);
-                if !o.lods.is_empty() {
-                    let slot = ctx
-                        .model
-                        .lod_level(o, s.radius, d)
-                        .unwrap_or(crate::scene::MAX_LODS);
-                    counters.count_lod(slot);
-                }
-                ctx.model.object_region(o, s.radius, d)
-            })
-            .collect();
+        let cost = |id: usize| {
+            let o = &ctx.scene.objects[id];
+            let s = &ctx.hierarchy.object_spheres[id];
+            let d = region.distance_to_point(s.center);
+            if !o.lods.is_empty() {
+                let slot = ctx
+                    .model
+                    .lod_level(o, s.radius, d)
+                    .unwrap_or(crate::scene::MAX_LODS);
+                counters.count_lod(slot);
+            }
+            ctx.model.object_region(o, s.radius, d)
+        };
+        if let Some(v) = visible {
+            return Self::sparse(ctx, v, cost);
+        }
+        let objects: Vec<Cost> = (0..ctx.scene.objects.len()).map(cost).collect();
         let h = ctx.hierarchy;
         let mut nodes = vec![Cost::default(); h.nodes.len()];
-        for id in (0..h.nodes.len()).rev() {
-            nodes[id] = match h.nodes[id].children {
-                None => h
-                    .objects(id as u32)
-                    .iter()
-                    .fold(Cost::default(), |acc, &o| acc + objects[o as usize]),
-                Some([l, r]) => nodes[l as usize] + nodes[r as usize],
-            };
+        let ids: Vec<u32> = (0..h.nodes.len() as u32).collect();
+        let mut down = ids.clone();
+        Self::sum(h, &objects, &mut nodes, &mut down, &ids);
+        RegionCosts {
+            objects,
+            nodes,
+            down,
+            sparse: None,
         }
-        RegionCosts { objects, nodes }
+    }
+
+    /// [`new`](Self::new) with a visible set: only the visible objects and
+    /// the clusters above them are computed, in pooled buffers. The same
+    /// values: a cluster with nothing visible costs zero either way.
+    fn sparse(ctx: &Context, visible: &ObjectSet, cost: impl Fn(usize) -> Cost) -> RegionCosts {
+        let h = ctx.hierarchy;
+        let (n_obj, n_nodes) = (ctx.scene.objects.len(), h.nodes.len());
+        let taken = {
+            let mut pool = POOL
+                .lock()
+                .unwrap_or_else(std::sync::PoisonError::into_inner);
+            pool.iter()
+                .position(|b| b.objects.len() == n_obj && b.nodes.len() == n_nodes)
+                .map(|k| pool.swap_remove(k))
+        };
+        let b = taken.unwrap_or_else(|| Buffers {
+            objects: vec![Cost::default(); n_obj],
+            nodes: vec![Cost::default(); n_nodes],
+            down: (0..n_nodes as u32).collect(),
+            sparse: Sparse {
+                objects: Vec::new(),
+                nodes: Vec::new(),
+                marked: vec![false; n_nodes],
+            },
+        });
+        let mut out = RegionCosts {
+            objects: b.objects,
+            nodes: b.nodes,
+            down: b.down,
+            sparse: None,
+        };
+        let mut sp = b.sparse;
+        sp.objects.extend(visible.iter());
+        for &o in &sp.objects {
+            out.objects[o as usize] = cost(o as usize);
+            let mut n = h.leaf_of[o as usize];
+            while n != u32::MAX && !sp.marked[n as usize] {
+                sp.marked[n as usize] = true;
+                sp.nodes.push(n);
+                n = h.nodes[n as usize].parent;
+            }
+        }
+        sp.nodes.sort_unstable();
+        Self::sum(h, &out.objects, &mut out.nodes, &mut out.down, &sp.nodes);
+        out.sparse = Some(sp);
+        out
+    }
+
+    /// Sets `nodes` and `down` of the clusters `ids` (ascending; summed
+    /// from the last, so children before parents) from the objects' costs
+    /// and the clusters' below.
+    fn sum(h: &Hierarchy, objects: &[Cost], nodes: &mut [Cost], down: &mut [u32], ids: &[u32]) {
+        let zero = Cost::default();
+        for &id in ids.iter().rev() {
+            let id = id as usize;
+            match h.nodes[id].children {
+                None => {
+                    nodes[id] = h
+                        .objects(id as u32)
+                        .iter()
+                        .fold(Cost::default(), |acc, &o| acc + objects[o as usize]);
+                }
+                Some([l, r]) => {
+                    nodes[id] = nodes[l as usize] + nodes[r as usize];
+                    if nodes[l as usize] == zero {
+                        down[id] = down[r as usize];
+                    } else if nodes[r as usize] == zero {
+                        down[id] = down[l as usize];
+                    }
+                }
+            }
+        }
     }
 
     /// Costs for the region of kd node `node`, with its cells' visible set.
@@ -316,7 +452,9 @@ pub fn exceeds(ctx: &Context, costs: &RegionCosts, cone: &Enclosing, t: f64) -> 
     // The whole costs of the clusters in the queue.
     let mut pending = costs.nodes[0];
     let margin = 1e-9 * model.frame_time(pending).abs().max(1.0);
-    let mut queue = VecDeque::from([(0u32, cone.all_bounds())]);
+    // A node with a child that costs nothing is skipped for its other
+    // child ([`RegionCosts::down`]): the same cost in a smaller sphere.
+    let mut queue = VecDeque::from([(costs.down[0], cone.all_bounds())]);
     while let Some((n, mask)) = queue.pop_front() {
         let whole = costs.nodes[n as usize];
         pending = pending - whole;
@@ -331,8 +469,8 @@ pub fn exceeds(ctx: &Context, costs: &RegionCosts, cone: &Enclosing, t: f64) -> 
             (Overlap::Partial, left) => match node.children {
                 None => sum += leaf_cost(ctx, costs, cone, n, left),
                 Some([l, r]) => {
-                    queue.push_back((l, left));
-                    queue.push_back((r, left));
+                    queue.push_back((costs.down[l as usize], left));
+                    queue.push_back((costs.down[r as usize], left));
                     pending += costs.nodes[l as usize] + costs.nodes[r as usize];
                     continue;
                 }
@@ -444,5 +582,94 @@ mod tests {
             }
         }
         assert!(sets > 100 && above > 0 && below > 0);
+    }
+
+    /// Costs with a visible set, computed in pooled buffers for the visible
+    /// objects and the clusters above them only, equal every object's and
+    /// cluster's dense costs with the invisible objects zeroed, bit for bit,
+    /// also when the buffers come back from a region that saw other
+    /// objects; and the early-exit walk, which steps past clusters with a
+    /// child that costs nothing, answers as the full sum does.
+    #[test]
+    fn visible_sets_cost_as_the_dense_sums_with_the_rest_zeroed() {
+        let scene = crate::testutil::synthetic_city(5, 6, 6);
+        let job = crate::testutil::synthetic_job(6, 6);
+        let h = Hierarchy::build(&scene);
+        let ctx = Context::new(&scene, &h, None, &job, Control::default());
+        let grid = job.grid();
+        let level = leaf_level(job.problem_views.min_vdi_deg);
+        let n = scene.objects.len();
+        let mut rng = crate::math::rng::Rng::new(3);
+        let mut held = Vec::new();
+        let (mut answers, mut visible_total) = (0, 0);
+        for (k, (i, j)) in [(0, 0), (2, 1), (5, 3), (3, 5), (1, 4), (0, 0)]
+            .into_iter()
+            .enumerate()
+        {
+            let region = grid.cell_box([i, 0, j], [i + 1, 1, j + 1]);
+            let share = [0.05, 0.3, 0.7, 0.01, 1.0, 0.15][k];
+            let mut set = ObjectSet::new(n);
+            for o in 0..n as u32 {
+                if rng.f64() < share {
+                    set.insert(o);
+                }
+            }
+            visible_total += set.count();
+            let dense = RegionCosts::new(&ctx, &region, None, &Counters::new());
+            let costs = RegionCosts::new(&ctx, &region, Some(&set), &Counters::new());
+            let objects: Vec<Cost> = (0..n)
+                .map(|o| {
+                    if set.contains(o as u32) {
+                        dense.objects[o]
+                    } else {
+                        Cost::default()
+                    }
+                })
+                .collect();
+            let mut nodes = vec![Cost::default(); h.nodes.len()];
+            for id in (0..h.nodes.len()).rev() {
+                nodes[id] = match h.nodes[id].children {
+                    None => h
+                        .objects(id as u32)
+                        .iter()
+                        .fold(Cost::default(), |acc, &o| acc + objects[o as usize]),
+                    Some([l, r]) => nodes[l as usize] + nodes[r as usize],
+                };
+            }
+            assert!(costs.objects == objects, "objects of set {k}");
+            assert!(costs.nodes == nodes, "clusters of set {k}");
+            for id in 0..h.nodes.len() {
+                let d = costs.down[id] as usize;
+                if nodes[id] != Cost::default() {
+                    assert!(
+                        nodes[d] == nodes[id]
+                            && (id..h.nodes[id].subtree_end as usize).contains(&d)
+                    );
+                }
+                // A cluster with a child that costs nothing is stepped past.
+                if let Some([l, r]) = h.nodes[id].children
+                    && (nodes[l as usize] == Cost::default())
+                        != (nodes[r as usize] == Cost::default())
+                {
+                    assert_ne!(d, id, "cluster {id} of set {k}");
+                }
+            }
+            for vdi in Vdi::all_at(level) {
+                let cone = enclosing_cone(&region, &vdi, &ctx.lens);
+                let t = ctx
+                    .model
+                    .frame_time(enclosed_cost(&ctx, &costs, &cone, &region, None));
+                for f in [0.9, 1.0 - 1e-6, 1.0 + 1e-6, 1.1] {
+                    assert_eq!(exceeds(&ctx, &costs, &cone, t * f), t > t * f);
+                    answers += 1;
+                }
+            }
+            // Every other set stays alive, so the next takes fresh buffers
+            // or another region's.
+            if k % 2 == 0 {
+                held.push(costs);
+            }
+        }
+        assert!(answers > 1000 && visible_total > 0 && visible_total < 6 * n);
     }
 }
