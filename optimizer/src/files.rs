@@ -189,10 +189,6 @@ impl serde_json::ser::Formatter for Layout {
         Ok(())
     }
 
-    fn end_array_value<W: ?Sized + Write>(&mut self, _: &mut W) -> std::io::Result<()> {
-        Ok(())
-    }
-
     fn end_array<W: ?Sized + Write>(&mut self, w: &mut W) -> std::io::Result<()> {
         if self.open.pop() == Some(Open::Block) {
             self.newline(w)?;

@@ -118,9 +118,8 @@ impl RegionCosts {
         let objects: Vec<Cost> = (0..ctx.scene.objects.len()).map(cost).collect();
         let h = ctx.hierarchy;
         let mut nodes = vec![Cost::default(); h.nodes.len()];
-        let ids: Vec<u32> = (0..h.nodes.len() as u32).collect();
-        let mut down = ids.clone();
-        Self::sum(h, &objects, &mut nodes, &mut down, &ids);
+        let mut down: Vec<u32> = (0..h.nodes.len() as u32).collect();
+        Self::sum(h, &objects, &mut nodes, &mut down, 0..h.nodes.len() as u32);
         RegionCosts {
             objects,
             nodes,
@@ -171,7 +170,13 @@ impl RegionCosts {
             }
         }
         sp.nodes.sort_unstable();
-        Self::sum(h, &out.objects, &mut out.nodes, &mut out.down, &sp.nodes);
+        Self::sum(
+            h,
+            &out.objects,
+            &mut out.nodes,
+            &mut out.down,
+            sp.nodes.iter().copied(),
+        );
         out.sparse = Some(sp);
         out
     }
@@ -179,9 +184,15 @@ impl RegionCosts {
     /// Sets `nodes` and `down` of the clusters `ids` (ascending; summed
     /// from the last, so children before parents) from the objects' costs
     /// and the clusters' below.
-    fn sum(h: &Hierarchy, objects: &[Cost], nodes: &mut [Cost], down: &mut [u32], ids: &[u32]) {
+    fn sum(
+        h: &Hierarchy,
+        objects: &[Cost],
+        nodes: &mut [Cost],
+        down: &mut [u32],
+        ids: impl DoubleEndedIterator<Item = u32>,
+    ) {
         let zero = Cost::default();
-        for &id in ids.iter().rev() {
+        for id in ids.rev() {
             let id = id as usize;
             match h.nodes[id].children {
                 None => {
