@@ -347,7 +347,7 @@ fn tileset_replaces_clusters_by_impostors_inside_their_cells() {
     let o = tiles(&city, &job, &p, &glb, &out);
     assert_eq!(code(&o), 0, "{}", stderr(&o));
 
-    let placement = read_json(&p);
+    let placement = read_placement(&p);
     let ts = read_json(&out.join("tileset.json"));
     let (uris, seen) = check_tileset(&ts, &placement).unwrap_or_else(|e| panic!("{e}"));
     let n = placement["impostors"].as_array().unwrap().len();

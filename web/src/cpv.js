@@ -37,3 +37,23 @@ export function findCpv(cpvs, vsMax, p, d) {
   }
   return null;
 }
+
+/// Gives every CPV of `cpvs` (as a placement file holds them,
+/// `schemas/placement.schema.json`) its whole impostor list: a CPV written
+/// as a change (`impostors_added`, `impostors_removed`) gets the list of the
+/// CPV before it without the removed ids and with the added ones, ascending.
+export function expandCpvLists(cpvs) {
+  let prev = [];
+  for (const [k, c] of cpvs.entries()) {
+    if (!c.impostors) {
+      if (k === 0) throw new Error("the placement's first CPV has no impostor list");
+      const removed = new Set(c.impostors_removed || []);
+      c.impostors = prev.filter((i) => !removed.has(i))
+        .concat(c.impostors_added || []).sort((a, b) => a - b);
+      delete c.impostors_added;
+      delete c.impostors_removed;
+    }
+    prev = c.impostors;
+  }
+  return cpvs;
+}

@@ -20,7 +20,7 @@ import { KTX2Loader } from "three/examples/jsm/loaders/KTX2Loader.js";
 import { DISPLAY_TRIANGLES, decimate } from "./decimate.js";
 import { bytes, json } from "./api.js";
 import { FrameChart } from "./chart.js";
-import { findCpv } from "./cpv.js";
+import { expandCpvLists, findCpv } from "./cpv.js";
 import { errorBox, h } from "./dom.js";
 import { glbJson, objectNodes } from "./objects.js";
 import { regionLines, viewCell, boxLines } from "./overlays.js";
@@ -87,6 +87,7 @@ async function load(id, renderer) {
     ktx2.dispose();
     draco.dispose();
   }
+  expandCpvLists(placement.cpvs);
   const sceneJson = glbJson(sceneBytes);
   const nodeObjects = await Promise.all(
     (sceneJson.nodes || []).map((_, i) => scene.parser.getDependency("node", i)));

@@ -7,6 +7,9 @@ use std::collections::BTreeMap;
 use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 
+mod cpv_lists;
+pub use cpv_lists::CpvJson;
+
 /// A placement.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
@@ -15,7 +18,11 @@ pub struct Placement {
     pub summary: Summary,
     /// The impostors; `id` is the index.
     pub impostors: Vec<PlacedImpostor>,
-    /// The conservative problem views, solved and unsolved; `id` is the index.
+    /// The conservative problem views, solved and unsolved; `id` is the
+    /// index. In JSON a CPV's impostor list may be written as its change
+    /// from the list of the CPV before it ([`CpvJson`]).
+    #[serde(with = "cpv_lists")]
+    #[schemars(with = "Vec<CpvJson>")]
     pub cpvs: Vec<PlacedCpv>,
 }
 
@@ -214,17 +221,13 @@ pub struct DirectionsJson {
     pub v: [f64; 2],
 }
 
-/// One conservative problem view.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
-#[serde(deny_unknown_fields)]
+/// One conservative problem view (in JSON, a [`CpvJson`], whose fields
+/// document these).
+#[derive(Clone, Debug, PartialEq)]
 pub struct PlacedCpv {
     /// Index in `cpvs`.
     pub id: u32,
-    /// Its 3D region: its grid cell, or the box of the parts of that cell
-    /// where a view may exceed the target (`problem_views.split_levels`); a
-    /// view belongs to the CPV when its eye lies in the region and its
-    /// direction in `directions`. Views of the cell outside the region are
-    /// within the target without impostors.
+    /// Its 3D region.
     pub region: RegionJson,
     /// Its view directions.
     pub directions: DirectionsJson,
@@ -234,9 +237,7 @@ pub struct PlacedCpv {
     pub time_ms_final: f64,
     /// True when `time_ms_final` is within the target.
     pub solved: bool,
-    /// Why an unsolved CPV could not be solved (absent when solved, and for
-    /// methods that do not explain it).
-    #[serde(default, skip_serializing_if = "Option::is_none")]
+    /// Why an unsolved CPV could not be solved.
     pub unsolved_reason: Option<UnsolvedReason>,
     /// Ids of the impostors to draw in this CPV, ascending.
     pub impostors: Vec<u32>,
