@@ -12,7 +12,7 @@ use crate::util::root;
 /// the modules of lower layers and its own; `evaluate`, the independent
 /// oracle, sits above everything it checks, so no stage can lean on it.
 const LAYERS: &[&[&str]] = &[
-    &["error", "control", "files"],
+    &["error", "control", "files", "sysmem"],
     &["math"],
     &["api"],
     &["scene"],

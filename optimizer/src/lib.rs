@@ -29,6 +29,7 @@ pub mod place;
 pub mod render;
 pub mod report;
 pub mod scene;
+pub mod sysmem;
 pub mod testutil;
 pub mod views;
 pub mod visibility;

@@ -6,6 +6,8 @@ pub mod tiles;
 
 use std::time::Instant;
 
+pub use crate::sysmem::{current_rss_bytes, machine_memory_bytes, peak_rss_bytes};
+
 use crate::api::job::{Job, Method};
 use crate::api::placement::Placement;
 use crate::api::stats::{StageTime, Stats, TiledForMemory};
@@ -500,34 +502,6 @@ pub fn predicted_peak_bytes(ctx: &Context, job: &Job, pv: &ProblemViews) -> u64 
         + greedy::marks_bytes(pv.cpvs.len(), pv.node_counts.len())
 }
 
-/// The memory this run may grow into, bytes: what the machine has
-/// available now (`MemAvailable`, which other processes' use lowers) and
-/// what this process already holds, never more than the machine's
-/// (`MemTotal`); `u64::MAX` when unknown.
-pub fn machine_memory_bytes() -> u64 {
-    let total = meminfo_kb("/proc/meminfo", "MemTotal:").map_or(u64::MAX, |kb| kb * 1024);
-    meminfo_kb("/proc/meminfo", "MemAvailable:").map_or(total, |kb| {
-        (kb * 1024).saturating_add(current_rss_bytes()).min(total)
-    })
-}
-
-/// Resident set size of this process now (VmRSS), bytes; 0 when unknown.
-pub fn current_rss_bytes() -> u64 {
-    meminfo_kb("/proc/self/status", "VmRSS:").map_or(0, |kb| kb * 1024)
-}
-
-/// The kB value of line `key` of a `/proc` file.
-fn meminfo_kb(path: &str, key: &str) -> Option<u64> {
-    std::fs::read_to_string(path)
-        .ok()?
-        .lines()
-        .find_map(|l| l.strip_prefix(key))?
-        .split_whitespace()
-        .next()?
-        .parse()
-        .ok()
-}
-
 /// Gives the heap freed memory back to the system: glibc keeps freed
 /// memory in its arenas, so after a job of several gigabytes an idle server
 /// would stay that large, and a tile's run would count what the tiles before
@@ -541,11 +515,6 @@ pub fn release_memory() {
     unsafe {
         libc::malloc_trim(0);
     }
-}
-
-/// Peak resident set size of this process (VmHWM), bytes; 0 when unknown.
-pub fn peak_rss_bytes() -> u64 {
-    meminfo_kb("/proc/self/status", "VmHWM:").map_or(0, |kb| kb * 1024)
 }
 
 #[cfg(test)]
@@ -725,7 +694,8 @@ mod tests {
     /// what other processes hold (here, at least the kernel's own).
     #[test]
     fn the_memory_limit_is_what_is_available() {
-        let total = meminfo_kb("/proc/meminfo", "MemTotal:").expect("MemTotal") * 1024;
+        let total =
+            crate::sysmem::meminfo_kb("/proc/meminfo", "MemTotal:").expect("MemTotal") * 1024;
         let limit = machine_memory_bytes();
         assert!(limit >= current_rss_bytes(), "{limit}");
         assert!(limit < total, "{limit} of {total}");

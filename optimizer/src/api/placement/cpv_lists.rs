@@ -181,9 +181,23 @@ pub fn serialize<S: Serializer>(cpvs: &[PlacedCpv], s: S) -> Result<S::Ok, S::Er
     seq.end()
 }
 
-/// Reads [`CpvJson`]s, rebuilding each CPV's list.
+/// Reads [`CpvJson`]s, rebuilding each CPV's list, within half the memory
+/// the machine has available.
 pub fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<Vec<PlacedCpv>, D::Error> {
-    struct Cpvs;
+    // Half of it: what reads the placement needs memory of its own.
+    let available =
+        crate::sysmem::machine_memory_bytes().saturating_sub(crate::sysmem::current_rss_bytes());
+    read(d, available / 2)
+}
+
+/// Reads [`CpvJson`]s, rebuilding each CPV's list; refuses them once the
+/// rebuilt lists take more than `budget` bytes (a list written as a change
+/// can be long however short its file: a file of many CPVs that each
+/// change nothing repeats one list for each).
+fn read<'de, D: Deserializer<'de>>(d: D, budget: u64) -> Result<Vec<PlacedCpv>, D::Error> {
+    struct Cpvs {
+        budget: u64,
+    }
     impl<'de> Visitor<'de> for Cpvs {
         type Value = Vec<PlacedCpv>;
 
@@ -193,6 +207,7 @@ pub fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<Vec<PlacedCpv>, D:
 
         fn visit_seq<A: SeqAccess<'de>>(self, mut seq: A) -> Result<Self::Value, A::Error> {
             let mut out: Vec<PlacedCpv> = Vec::new();
+            let mut bytes = 0u64;
             while let Some(j) = seq.next_element::<CpvJson>()? {
                 let k = out.len();
                 let bad = |m: String| A::Error::custom(format!("cpvs[{k}]: {m}"));
@@ -222,6 +237,17 @@ pub fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<Vec<PlacedCpv>, D:
                             .into()));
                     }
                 };
+                bytes += (std::mem::size_of::<PlacedCpv>() + 4 * impostors.len()) as u64;
+                if bytes > self.budget {
+                    return Err(bad(format!(
+                        "the CPVs' impostor lists rebuilt up to here take {:.2} GB, more than the \
+                         {:.2} GB of memory they may use (half of what is available; a list \
+                         written as its change from the one before it is as long as the list it \
+                         rebuilds, however short the file)",
+                        bytes as f64 * 1e-9,
+                        self.budget as f64 * 1e-9
+                    )));
+                }
                 out.push(PlacedCpv {
                     id: j.id,
                     region: j.region.into_owned(),
@@ -236,7 +262,7 @@ pub fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<Vec<PlacedCpv>, D:
             Ok(out)
         }
     }
-    d.deserialize_seq(Cpvs)
+    d.deserialize_seq(Cpvs { budget })
 }
 
 #[cfg(test)]
@@ -384,5 +410,40 @@ mod tests {
         ])
         .unwrap_err();
         assert!(e.contains("out of order"), "{e}");
+    }
+
+    /// A file of many CPVs that each change nothing repeats the first list
+    /// for each: reading stops, naming the memory, once the rebuilt lists
+    /// pass the budget, not once the machine runs out.
+    #[test]
+    fn lists_rebuilt_beyond_the_memory_budget_are_refused() {
+        let first = cpv(0, (0..1000).collect());
+        let mut cpvs =
+            vec![serde_json::to_value(Wrap { cpvs: vec![first] }).unwrap()["cpvs"][0].clone()];
+        for id in 1..100u32 {
+            let mut c = cpvs[0].clone();
+            let c_ = c.as_object_mut().unwrap();
+            c_.remove("impostors");
+            c_.insert("id".into(), json!(id));
+            c_.insert("impostors_added".into(), json!([]));
+            c_.insert("impostors_removed".into(), json!([]));
+            cpvs.push(c);
+        }
+        let text = serde_json::to_string(&cpvs).unwrap();
+        let within = |budget: u64| {
+            read(&mut serde_json::Deserializer::from_str(&text), budget).map_err(|e| e.to_string())
+        };
+        // 100 lists of 1,000 ids: about 400 kB.
+        let all = within(1 << 20).unwrap();
+        assert_eq!(all.len(), 100);
+        assert!(all.iter().all(|c| c.impostors.len() == 1000));
+        let e = within(200_000).unwrap_err();
+        // The first CPV past it: `k + 1` lists take more than the budget.
+        let each = std::mem::size_of::<PlacedCpv>() + 4000;
+        let k = 200_000 / each;
+        assert!(
+            e.contains("of memory they may use") && e.contains(&format!("cpvs[{k}]:")),
+            "{e}"
+        );
     }
 }
