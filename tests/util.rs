@@ -53,19 +53,8 @@ pub fn read_json(p: &Path) -> serde_json::Value {
 /// library's reader.
 pub fn read_placement(p: &Path) -> serde_json::Value {
     let mut v = read_json(p);
-    let placement: optimizer::api::placement::Placement =
-        serde_json::from_value(v.clone()).unwrap_or_else(|e| panic!("{}: {e}", p.display()));
-    for (c, whole) in v["cpvs"]
-        .as_array_mut()
-        .unwrap()
-        .iter_mut()
-        .zip(&placement.cpvs)
-    {
-        let c = c.as_object_mut().unwrap();
-        c.remove("impostors_added");
-        c.remove("impostors_removed");
-        c.insert("impostors".into(), serde_json::json!(whole.impostors));
-    }
+    optimizer::api::placement::whole_lists(&mut v)
+        .unwrap_or_else(|e| panic!("{}: {e}", p.display()));
     v
 }
 

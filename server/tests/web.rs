@@ -275,19 +275,7 @@ fn open_viewer(b: &mut Browser) {
 /// library's reader.
 fn whole_lists(file: &[u8]) -> Value {
     let mut v: Value = serde_json::from_slice(file).unwrap();
-    let placement: optimizer::api::placement::Placement =
-        serde_json::from_value(v.clone()).unwrap();
-    for (c, whole) in v["cpvs"]
-        .as_array_mut()
-        .unwrap()
-        .iter_mut()
-        .zip(&placement.cpvs)
-    {
-        let c = c.as_object_mut().unwrap();
-        c.remove("impostors_added");
-        c.remove("impostors_removed");
-        c.insert("impostors".into(), serde_json::json!(whole.impostors));
-    }
+    optimizer::api::placement::whole_lists(&mut v).unwrap();
     v
 }
 

@@ -8,7 +8,7 @@ use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 
 mod cpv_lists;
-pub use cpv_lists::CpvJson;
+pub use cpv_lists::{CpvJson, whole_lists};
 
 /// A placement.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]

@@ -265,6 +265,24 @@ fn read<'de, D: Deserializer<'de>>(d: D, budget: u64) -> Result<Vec<PlacedCpv>, 
     d.deserialize_seq(Cpvs { budget })
 }
 
+/// A placement file's JSON with every CPV's impostor list whole
+/// (`impostors`), for code that reads the JSON itself rather than a
+/// [`super::Placement`]; an error names what a list's change got wrong.
+pub fn whole_lists(placement: &mut serde_json::Value) -> Result<(), serde_json::Error> {
+    let rebuilt = deserialize(&placement["cpvs"])?;
+    let cpvs = placement["cpvs"]
+        .as_array_mut()
+        .expect("a list of CPVs was read from it");
+    for (c, whole) in cpvs.iter_mut().zip(rebuilt) {
+        if let Some(c) = c.as_object_mut() {
+            c.remove("impostors_added");
+            c.remove("impostors_removed");
+            c.insert("impostors".into(), whole.impostors.into());
+        }
+    }
+    Ok(())
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -347,8 +365,15 @@ mod tests {
                 json!([[20, 21], null, null]),
             ]
         );
-        let back: Wrap = serde_json::from_value(v).unwrap();
+        let back: Wrap = serde_json::from_value(v.clone()).unwrap();
         assert_eq!(back, w);
+        // The same lists written whole, as plain JSON.
+        let mut whole = v;
+        whole_lists(&mut whole).unwrap();
+        for (c, l) in whole["cpvs"].as_array().unwrap().iter().zip(&lists) {
+            assert_eq!(c["impostors"], json!(l));
+            assert!(c.get("impostors_added").is_none() && c.get("impostors_removed").is_none());
+        }
     }
 
     #[test]
