@@ -20,7 +20,7 @@ pub fn current_rss_bytes() -> u64 {
 }
 
 /// The kB value of line `key` of a `/proc` file.
-pub(crate) fn meminfo_kb(path: &str, key: &str) -> Option<u64> {
+fn meminfo_kb(path: &str, key: &str) -> Option<u64> {
     std::fs::read_to_string(path)
         .ok()?
         .lines()
@@ -34,4 +34,20 @@ pub(crate) fn meminfo_kb(path: &str, key: &str) -> Option<u64> {
 /// Peak resident set size of this process (VmHWM), bytes; 0 when unknown.
 pub fn peak_rss_bytes() -> u64 {
     meminfo_kb("/proc/self/status", "VmHWM:").map_or(0, |kb| kb * 1024)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The default limit is the memory available to this run: at least
+    /// what it holds, at most the machine's, and below the machine's by
+    /// what other processes hold (here, at least the kernel's own).
+    #[test]
+    fn the_memory_limit_is_what_is_available() {
+        let total = meminfo_kb("/proc/meminfo", "MemTotal:").expect("MemTotal") * 1024;
+        let limit = machine_memory_bytes();
+        assert!(limit >= current_rss_bytes(), "{limit}");
+        assert!(limit < total, "{limit} of {total}");
+    }
 }

@@ -689,18 +689,6 @@ mod tests {
         assert!(matches!(r, Err(Error::Cancelled)));
     }
 
-    /// The default limit is the memory available to this run: at least
-    /// what it holds, at most the machine's, and below the machine's by
-    /// what other processes hold (here, at least the kernel's own).
-    #[test]
-    fn the_memory_limit_is_what_is_available() {
-        let total =
-            crate::sysmem::meminfo_kb("/proc/meminfo", "MemTotal:").expect("MemTotal") * 1024;
-        let limit = machine_memory_bytes();
-        assert!(limit >= current_rss_bytes(), "{limit}");
-        assert!(limit < total, "{limit} of {total}");
-    }
-
     #[test]
     fn jobs_beyond_the_memory_limit_are_refused() {
         let scene = synthetic_city(1, 5, 5);
