@@ -1,6 +1,7 @@
 //! Tiled placement (`"partition": {"tiles": [nx, nz]}`) on the full
-//! generated city with conservative visibility at 4 ms, where the same
-//! views without impostors break the target.
+//! generated city with conservative visibility at 3.5 ms, where the same
+//! views without impostors break the target (its views with visibility
+//! peak at 3.85 ms: at 4 ms the control no longer fails).
 
 use crate::util::*;
 
@@ -13,7 +14,7 @@ fn a_tiled_job_keeps_the_guarantee_on_the_whole_view_space() {
     let dir = tmp("tiles");
     let city = city("1");
     let mut job = read_json(&root().join("fixtures/jobs/vienna-reference.json"));
-    job["target_frame_time_ms"] = serde_json::json!(4.0);
+    job["target_frame_time_ms"] = serde_json::json!(3.5);
     job["visibility"] = serde_json::json!({"mode": "conservative"});
     let whole = dir.join("whole.json");
     std::fs::write(&whole, serde_json::to_vec(&job).unwrap()).unwrap();

@@ -5,6 +5,7 @@
 use std::collections::VecDeque;
 
 use crate::math::enclosing::{Bounds, Enclosing, Overlap, enclosing_cone};
+use crate::math::geom::Sphere;
 use crate::math::geom::{Aabb, Vdi};
 use crate::model::cost::Cost;
 use crate::scene::hierarchy::Hierarchy;
@@ -26,6 +27,11 @@ pub struct RegionCosts {
     /// Its cost is the node's, and its sphere lies inside the node's, so
     /// the walk sums the same costs with fewer sphere tests.
     pub down: Vec<u32>,
+    /// With a visible set, per node id set in it: a sphere holding the
+    /// spheres of the node's objects that cost something from the region,
+    /// each inside its parent's (the node's own sphere where that is
+    /// smaller); empty without one (the nodes' own spheres).
+    spheres: Vec<Sphere>,
     /// With a visible set: the entries set (visible objects, the clusters
     /// above them), cleared again when the buffers go back to [`POOL`].
     sparse: Option<Sparse>,
@@ -52,6 +58,7 @@ struct Buffers {
     objects: Vec<Cost>,
     nodes: Vec<Cost>,
     down: Vec<u32>,
+    spheres: Vec<Sphere>,
     sparse: Sparse,
 }
 
@@ -77,6 +84,7 @@ impl Drop for RegionCosts {
             objects: std::mem::take(&mut self.objects),
             nodes: std::mem::take(&mut self.nodes),
             down: std::mem::take(&mut self.down),
+            spheres: std::mem::take(&mut self.spheres),
             sparse: sp,
         };
         let mut pool = POOL
@@ -119,11 +127,19 @@ impl RegionCosts {
         let h = ctx.hierarchy;
         let mut nodes = vec![Cost::default(); h.nodes.len()];
         let mut down: Vec<u32> = (0..h.nodes.len() as u32).collect();
-        Self::sum(h, &objects, &mut nodes, &mut down, 0..h.nodes.len() as u32);
+        Self::sum(
+            h,
+            &objects,
+            &mut nodes,
+            &mut down,
+            None,
+            0..h.nodes.len() as u32,
+        );
         RegionCosts {
             objects,
             nodes,
             down,
+            spheres: Vec::new(),
             sparse: None,
         }
     }
@@ -146,6 +162,7 @@ impl RegionCosts {
             objects: vec![Cost::default(); n_obj],
             nodes: vec![Cost::default(); n_nodes],
             down: (0..n_nodes as u32).collect(),
+            spheres: vec![h.nodes[0].sphere; n_nodes],
             sparse: Sparse {
                 objects: Vec::new(),
                 nodes: Vec::new(),
@@ -156,6 +173,7 @@ impl RegionCosts {
             objects: b.objects,
             nodes: b.nodes,
             down: b.down,
+            spheres: b.spheres,
             sparse: None,
         };
         let mut sp = b.sparse;
@@ -175,6 +193,7 @@ impl RegionCosts {
             &out.objects,
             &mut out.nodes,
             &mut out.down,
+            Some(&mut out.spheres),
             sp.nodes.iter().copied(),
         );
         out.sparse = Some(sp);
@@ -183,33 +202,66 @@ impl RegionCosts {
 
     /// Sets `nodes` and `down` of the clusters `ids` (ascending; summed
     /// from the last, so children before parents) from the objects' costs
-    /// and the clusters' below.
+    /// and the clusters' below, and their `spheres` where given.
     fn sum(
         h: &Hierarchy,
         objects: &[Cost],
         nodes: &mut [Cost],
         down: &mut [u32],
+        mut spheres: Option<&mut Vec<Sphere>>,
         ids: impl DoubleEndedIterator<Item = u32>,
     ) {
         let zero = Cost::default();
         for id in ids.rev() {
             let id = id as usize;
-            match h.nodes[id].children {
+            let node = &h.nodes[id];
+            match node.children {
                 None => {
                     nodes[id] = h
                         .objects(id as u32)
                         .iter()
                         .fold(Cost::default(), |acc, &o| acc + objects[o as usize]);
+                    if let Some(sp) = spheres.as_deref_mut() {
+                        // Merged in the order the hierarchy merges them.
+                        let fit = h
+                            .objects(id as u32)
+                            .iter()
+                            .filter(|&&o| objects[o as usize] != zero)
+                            .map(|&o| h.object_spheres[o as usize])
+                            .reduce(|a, b| a.merge(&b));
+                        sp[id] = smaller(fit, node.sphere);
+                    }
                 }
                 Some([l, r]) => {
-                    nodes[id] = nodes[l as usize] + nodes[r as usize];
-                    if nodes[l as usize] == zero {
+                    let (cl, cr) = (nodes[l as usize], nodes[r as usize]);
+                    nodes[id] = cl + cr;
+                    if cl == zero {
                         down[id] = down[r as usize];
-                    } else if nodes[r as usize] == zero {
+                    } else if cr == zero {
                         down[id] = down[l as usize];
+                    }
+                    if let Some(sp) = spheres.as_deref_mut() {
+                        let fit = match (cl != zero, cr != zero) {
+                            (true, true) => Some(sp[l as usize].merge(&sp[r as usize])),
+                            (true, false) => Some(sp[l as usize]),
+                            (false, true) => Some(sp[r as usize]),
+                            (false, false) => None,
+                        };
+                        sp[id] = smaller(fit, node.sphere);
                     }
                 }
             }
+        }
+    }
+
+    /// The sphere the walks of [`exceeds`] test for node `n` (one it set:
+    /// costing something from the region).
+    #[inline]
+    fn sphere(&self, h: &Hierarchy, n: u32) -> Sphere {
+        if self.spheres.is_empty() {
+            h.nodes[n as usize].sphere
+        } else {
+            self.spheres[n as usize]
         }
     }
 
@@ -217,6 +269,17 @@ impl RegionCosts {
     pub fn of_kd(ctx: &Context, node: &KdNode, counters: &Counters) -> RegionCosts {
         let visible = ctx.visibility.and_then(|v| v.region(node.lo, node.hi));
         RegionCosts::new(ctx, &node.aabb, visible.as_deref(), counters)
+    }
+}
+
+/// The smaller of a sphere fitted to part of a node's objects (none: it has
+/// nothing to fit) and the node's own sphere, which holds them all: both
+/// hold the fitted objects, and a parent holds whichever each child took
+/// (its fit merges them; its own sphere holds the children's own).
+fn smaller(fit: Option<Sphere>, own: Sphere) -> Sphere {
+    match fit {
+        Some(f) if f.radius < own.radius => f,
+        _ => own,
     }
 }
 
@@ -473,7 +536,7 @@ pub fn exceeds(ctx: &Context, costs: &RegionCosts, cone: &Enclosing, t: f64) -> 
             continue;
         }
         let node = &h.nodes[n as usize];
-        let s = node.sphere;
+        let s = costs.sphere(h, n);
         match cone.classify_within(s.center, s.radius, mask) {
             (Overlap::Outside, _) => {}
             (Overlap::Inside, _) => sum += whole,
@@ -600,7 +663,8 @@ mod tests {
     /// cluster's dense costs with the invisible objects zeroed, bit for bit,
     /// also when the buffers come back from a region that saw other
     /// objects; and the early-exit walk, which steps past clusters with a
-    /// child that costs nothing, answers as the full sum does.
+    /// child that costs nothing and tests spheres fitted to what costs
+    /// something, answers as the full sum does.
     #[test]
     fn visible_sets_cost_as_the_dense_sums_with_the_rest_zeroed() {
         let scene = crate::testutil::synthetic_city(5, 6, 6);
@@ -612,7 +676,7 @@ mod tests {
         let n = scene.objects.len();
         let mut rng = crate::math::rng::Rng::new(3);
         let mut held = Vec::new();
-        let (mut answers, mut visible_total) = (0, 0);
+        let (mut answers, mut visible_total, mut tighter) = (0, 0, 0);
         for (k, (i, j)) in [(0, 0), (2, 1), (5, 3), (3, 5), (1, 4), (0, 0)]
             .into_iter()
             .enumerate()
@@ -665,6 +729,26 @@ mod tests {
                     assert_ne!(d, id, "cluster {id} of set {k}");
                 }
             }
+            // The walks' spheres hold every object that costs something,
+            // are never larger than the clusters' own, and are smaller where
+            // little of a cluster is visible.
+            for (id, node) in h.nodes.iter().enumerate() {
+                if nodes[id] == Cost::default() {
+                    continue;
+                }
+                let sp = costs.sphere(&h, id as u32);
+                assert!(sp.radius <= node.sphere.radius, "cluster {id} of set {k}");
+                tighter += usize::from(sp.radius < node.sphere.radius);
+                for &o in &h.order[node.objects.0 as usize..node.objects.1 as usize] {
+                    let os = h.object_spheres[o as usize];
+                    assert!(
+                        objects[o as usize] == Cost::default()
+                            || sp.center.distance(os.center) + os.radius
+                                <= sp.radius * (1.0 + 1e-9) + 1e-9,
+                        "object {o} outside the sphere of cluster {id}, set {k}"
+                    );
+                }
+            }
             for vdi in Vdi::all_at(level) {
                 let cone = enclosing_cone(&region, &vdi, &ctx.lens);
                 let t = ctx
@@ -682,5 +766,6 @@ mod tests {
             }
         }
         assert!(answers > 1000 && visible_total > 0 && visible_total < 6 * n);
+        assert!(tighter > 0);
     }
 }

@@ -37,7 +37,13 @@
 //!   `L = (b − y_s) / (b ≤ y_s ? r_front : r_near)` and
 //!   `U = (h − y_s) / (h ≥ y_s ? r_front : r_near)`, for every target point
 //!   farther than `r_front`. The occluder adds `[L, U]` (keyed by `r_front`)
-//!   only to bins that lie entirely inside its angular interval.
+//!   to bins that lie entirely inside its angular interval. The two bins
+//!   its interval ends in are covered only in part; each part is kept and
+//!   fused with a part of another occluder that covers the rest of the
+//!   bin from its other end: every ray of the bin then meets one of the
+//!   two, so the bin gets `[max L, min U]` keyed by the larger `r_front`
+//!   (the far skyline's occluders each cover a bin or two; without the
+//!   fusion the bins at their edges would let rays pass).
 //! * A shrunk occluder straight above the sample (footprint around it,
 //!   bottom `b > y_s`) blocks every ray with `σ ≥ (b − y_s)/r_exit` towards
 //!   targets whose bottom is at least `b` (`r_exit`: distance to the
@@ -52,19 +58,18 @@
 
 use glam::DVec3;
 
+mod horizon;
+
+pub use horizon::BINS;
+use horizon::Horizon;
+#[cfg(test)]
+use horizon::{BIN, angular_interval, azimuth, direction};
+
 use super::ObjectSet;
 use super::occluders::OccluderBox;
 use crate::math::geom::Aabb;
 use crate::scene::Scene;
 use crate::scene::hierarchy::Hierarchy;
-
-/// Azimuth bins around a sample point.
-pub const BINS: usize = 512;
-
-/// The diamond angle runs over `[0, PERIOD)`.
-const PERIOD: f64 = 4.0;
-
-const BIN: f64 = PERIOD / BINS as f64;
 
 /// Extra shrinking beyond the sample spacing, metres: puts the points `q'`
 /// of the argument strictly inside the occluders.
@@ -137,15 +142,19 @@ impl Conservative {
             |a: &Aabb, b: &Aabb| a.min.cmple(b.max).all() && b.min.cmple(a.max).all();
         // Occluders whose solids meet the cell may contain viewpoints; those
         // with an open bottom need the cell strictly above it.
-        let usable: Vec<bool> = self
-            .occluders
-            .iter()
-            .map(|o| !closed_meets(&o.support, cell) && cell.min.y > o.open_below)
-            .collect();
+        // (Tested where a leaf of the footprint tree is visited, not for
+        // every occluder of the scene per cell.)
+        let usable = |o: u32| {
+            let o = &self.occluders[o as usize];
+            !closed_meets(&o.support, cell) && cell.min.y > o.open_below
+        };
         let mut visible = ObjectSet::new(scene.objects.len());
-        // Per cluster, its objects not yet known to be visible: a cluster
-        // with none left needs no test from later samples.
-        let mut hidden: Vec<u32> = h.nodes.iter().map(|n| n.objects.1 - n.objects.0).collect();
+        // Per cluster, its objects known to be visible: a cluster with all
+        // of them needs no test from later samples. Kept per thread and
+        // cleared where it was set, not allocated per cell over the whole
+        // hierarchy.
+        let mut seen = SEEN.with_borrow_mut(std::mem::take);
+        seen.resize(h.nodes.len(), 0);
         let root = h.nodes[0].aabb;
         let mut horizon = Horizon::new([root.min.y, root.max.y]);
         let n = self.samples;
@@ -160,31 +169,28 @@ impl Conservative {
                                 (f64::from(j) + 0.5) / f64::from(n[1]),
                                 (f64::from(k) + 0.5) / f64::from(n[2]),
                             );
-                    horizon.build(s, self, &usable);
-                    mark_visible(&horizon, cell, scene, h, &mut visible, &mut hidden);
+                    horizon.build(s, self, usable);
+                    mark_visible(&horizon, cell, scene, h, &mut visible, &mut seen);
                 }
             }
         }
+        // Only the clusters above visible objects were counted.
+        for o in visible.iter() {
+            let mut k = h.leaf_of[o as usize];
+            while k != u32::MAX && seen[k as usize] != 0 {
+                seen[k as usize] = 0;
+                k = h.nodes[k as usize].parent;
+            }
+        }
+        SEEN.with_borrow_mut(|s| *s = seen);
         visible
     }
 }
 
-/// A distance ordered with `total_cmp` (for the traversal heap).
-#[derive(Clone, Copy, Debug, PartialEq)]
-struct Dist(f64);
-
-impl Eq for Dist {}
-
-impl PartialOrd for Dist {
-    fn partial_cmp(&self, other: &Self) -> Option<std::cmp::Ordering> {
-        Some(self.cmp(other))
-    }
-}
-
-impl Ord for Dist {
-    fn cmp(&self, other: &Self) -> std::cmp::Ordering {
-        self.0.total_cmp(&other.0)
-    }
+thread_local! {
+    /// [`Conservative::cell_pvs`]'s per-cluster counts of visible objects,
+    /// all zero between calls.
+    static SEEN: std::cell::RefCell<Vec<u32>> = const { std::cell::RefCell::new(Vec::new()) };
 }
 
 /// A node of the occluder footprint hierarchy.
@@ -269,508 +275,21 @@ fn build_tree(occ: &[Shrunk]) -> (Vec<TreeNode>, Vec<u32>) {
     (nodes, order)
 }
 
-/// An occluder's slope interval in one bin.
-#[derive(Clone, Copy, Debug)]
-struct Entry {
-    r_key: f64,
-    lo: f64,
-    hi: f64,
-}
-
-/// What occludes around one sample point.
-struct Horizon {
-    /// Reciprocal components `(1/x, 1/z)` of the unit direction of every
-    /// bin boundary `k·BIN`, `k = 0..=BINS` (infinite for a zero component).
-    dirs: Vec<(f64, f64)>,
-    s: DVec3,
-    /// Lowest and highest point of the scene.
-    y_range: [f64; 2],
-    bins: Vec<Vec<Entry>>,
-    /// Per bin, a distance beyond which every point of the scene's height
-    /// range is hidden by a single entry of the bin (`inf`: none).
-    closed: Vec<f64>,
-    touched: Vec<u32>,
-    /// Scratch: a footprint leaf's occluders by distance.
-    leaf: Vec<(f64, u32)>,
-    /// `(σ_c, b)`: blocks `σ ≥ σ_c` for targets with bottom ≥ `b`.
-    ceilings: Vec<(f64, f64)>,
-    /// `(σ_f, h)`: blocks `σ ≤ σ_f` for targets with top ≤ `h`.
-    floors: Vec<(f64, f64)>,
-}
-
-/// Diamond angle of `(dx, dz)` in `[0, 4)`: a monotone stand-in for the
-/// azimuth (`atan2`) that needs one division.
-fn azimuth(dx: f64, dz: f64) -> f64 {
-    if dx == 0.0 && dz == 0.0 {
-        return 0.0;
-    }
-    if dz >= 0.0 {
-        if dx >= 0.0 {
-            dz / (dx + dz)
-        } else {
-            1.0 - dx / (-dx + dz)
-        }
-    } else if dx < 0.0 {
-        2.0 - dz / (-dx - dz)
-    } else {
-        3.0 + dx / (dx - dz)
-    }
-}
-
-/// The unit direction `(x, z)` of diamond angle `p`.
-fn direction(p: f64) -> (f64, f64) {
-    let p = p.rem_euclid(PERIOD);
-    let q = p.floor();
-    let f = p - q;
-    let (x, z) = match q as u32 {
-        0 => (1.0 - f, f),
-        1 => (-f, 1.0 - f),
-        2 => (f - 1.0, -f),
-        _ => (f, f - 1.0),
-    };
-    let l = x.hypot(z);
-    (x / l, z / l)
-}
-
-/// Angular interval `[lo, hi]` (diamond angle, `hi − lo < 2`, `lo` may be
-/// below 0) of a footprint rectangle seen from outside it.
-fn angular_interval(s: DVec3, x0: f64, x1: f64, z0: f64, z1: f64) -> (f64, f64) {
-    // Seen from outside, two corners bound the rectangle's directions:
-    // the first clockwise-most, the second counter-clockwise-most.
-    let ((ax, az), (bx, bz)) = if s.x < x0 {
-        if s.z < z0 {
-            ((x1, z0), (x0, z1))
-        } else if s.z > z1 {
-            ((x0, z0), (x1, z1))
-        } else {
-            ((x0, z0), (x0, z1))
-        }
-    } else if s.x > x1 {
-        if s.z < z0 {
-            ((x1, z1), (x0, z0))
-        } else if s.z > z1 {
-            ((x0, z1), (x1, z0))
-        } else {
-            ((x1, z1), (x1, z0))
-        }
-    } else if s.z < z0 {
-        ((x1, z0), (x0, z0))
-    } else if s.z > z1 {
-        ((x0, z1), (x1, z1))
-    } else {
-        // Inside (callers treat this case apart): every direction.
-        return (0.0, PERIOD);
-    };
-    let lo = azimuth(ax - s.x, az - s.z);
-    let hi = azimuth(bx - s.x, bz - s.z);
-    if hi < lo { (lo - PERIOD, hi) } else { (lo, hi) }
-}
-
-/// Horizontal distance from `s` to a footprint rectangle (0 inside) and to
-/// its farthest corner.
-fn rect_distances(s: DVec3, x0: f64, x1: f64, z0: f64, z1: f64) -> (f64, f64) {
-    (
-        rect_near2(s, x0, x1, z0, z1).sqrt(),
-        rect_far(s, x0, x1, z0, z1),
-    )
-}
-
-/// Squared horizontal distance from `s` to a footprint rectangle.
-#[inline]
-fn rect_near2(s: DVec3, x0: f64, x1: f64, z0: f64, z1: f64) -> f64 {
-    let dx = (x0 - s.x).max(s.x - x1).max(0.0);
-    let dz = (z0 - s.z).max(s.z - z1).max(0.0);
-    dx * dx + dz * dz
-}
-
-/// Horizontal distance from `s` to a footprint rectangle's farthest corner.
-#[inline]
-fn rect_far(s: DVec3, x0: f64, x1: f64, z0: f64, z1: f64) -> f64 {
-    let fx = (s.x - x0).abs().max((s.x - x1).abs());
-    let fz = (s.z - z0).abs().max((s.z - z1).abs());
-    (fx * fx + fz * fz).sqrt()
-}
-
-/// `x.floor() as i64` without a libm call (saturating like the cast).
-#[inline]
-fn floor_i64(x: f64) -> i64 {
-    let i = x as i64;
-    if (i as f64) > x {
-        i.saturating_sub(1)
-    } else {
-        i
-    }
-}
-
-/// `x.ceil() as i64` without a libm call (saturating like the cast).
-#[inline]
-fn ceil_i64(x: f64) -> i64 {
-    let i = x as i64;
-    if (i as f64) < x {
-        i.saturating_add(1)
-    } else {
-        i
-    }
-}
-
-fn bin_of(k: i64) -> usize {
-    k.rem_euclid(BINS as i64) as usize
-}
-
-impl Horizon {
-    fn new(y_range: [f64; 2]) -> Horizon {
-        Horizon {
-            dirs: (0..=BINS)
-                .map(|k| {
-                    let (x, z) = direction(k as f64 * BIN);
-                    (1.0 / x, 1.0 / z)
-                })
-                .collect(),
-            s: DVec3::ZERO,
-            y_range,
-            bins: vec![Vec::new(); BINS],
-            closed: vec![f64::INFINITY; BINS],
-            touched: Vec::new(),
-            leaf: Vec::new(),
-            ceilings: Vec::new(),
-            floors: Vec::new(),
-        }
-    }
-
-    /// The horizon of sample `s` from the usable occluders of `c`, visited
-    /// front to back through the footprint hierarchy; a group whose every
-    /// bin is already closed nearer than the group is skipped whole.
-    fn build(&mut self, s: DVec3, c: &Conservative, usable: &[bool]) {
-        for &t in &self.touched {
-            self.bins[t as usize].clear();
-            self.closed[t as usize] = f64::INFINITY;
-        }
-        self.touched.clear();
-        self.ceilings.clear();
-        self.floors.clear();
-        self.s = s;
-        if c.tree.is_empty() {
-            return;
-        }
-        // Ordered by squared distance (the same order, one root per pop).
-        let near = |r: &[f64; 4]| rect_near2(s, r[0], r[1], r[2], r[3]);
-        // Min-heap on distance (ties by node id: deterministic).
-        let mut heap = std::collections::BinaryHeap::new();
-        heap.push(std::cmp::Reverse((Dist(near(&c.tree[0].rect)), 0u32)));
-        while let Some(std::cmp::Reverse((Dist(near2), id))) = heap.pop() {
-            let r_near = near2.sqrt();
-            let node = &c.tree[id as usize];
-            let [x0, x1, z0, z1] = node.rect;
-            let outside = s.x < x0 || s.x > x1 || s.z < z0 || s.z > z1;
-            if outside && r_near > 0.0 && self.dominated(node.rect, node.y, r_near) {
-                continue;
-            }
-            if node.left == u32::MAX {
-                // Nearest first: nearer occluders make farther ones useless.
-                let mut leaf = std::mem::take(&mut self.leaf);
-                leaf.clear();
-                leaf.extend(
-                    c.order[node.first as usize..(node.first + node.count) as usize]
-                        .iter()
-                        .filter(|&&o| usable[o as usize])
-                        .map(|&o| {
-                            let b = &c.occluders[o as usize].b;
-                            (rect_near2(s, b.min.x, b.max.x, b.min.z, b.max.z), o)
-                        }),
-                );
-                leaf.sort_unstable_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
-                for &(_, o) in &leaf {
-                    self.add(&c.occluders[o as usize]);
-                }
-                self.leaf = leaf;
-            } else {
-                for ch in [node.left, node.right] {
-                    heap.push(std::cmp::Reverse((
-                        Dist(near(&c.tree[ch as usize].rect)),
-                        ch,
-                    )));
-                }
-            }
-        }
-        for &t in &self.touched {
-            self.bins[t as usize].sort_by(|a, b| a.lo.total_cmp(&b.lo));
-        }
-    }
-
-    /// True when nothing inside footprint `rect` with heights `y`, at least
-    /// `r_near` away and seen from outside, could add a useful entry: in
-    /// every bin its angular interval touches, the bin is closed nearer
-    /// than `r_near` or an entry keyed nearer covers the loosest interval
-    /// any occluder there could get. (Skipping dominated entries changes
-    /// nothing: insertion discards them anyway.)
-    fn dominated(&self, rect: [f64; 4], y: [f64; 2], r_near: f64) -> bool {
-        let s = self.s;
-        let [x0, x1, z0, z1] = rect;
-        let r_far = rect_far(s, x0, x1, z0, z1);
-        let lo = (y[0] - s.y) / if y[0] <= s.y { r_near } else { r_far };
-        let hi = (y[1] - s.y) / if y[1] >= s.y { r_near } else { r_far };
-        let (a0, a1) = angular_interval(s, x0, x1, z0, z1);
-        let first = floor_i64(a0 / BIN);
-        let last = floor_i64(a1 / BIN);
-        (first..=last).all(|k| {
-            let b = bin_of(k);
-            self.closed[b] <= r_near
-                || self.bins[b]
-                    .iter()
-                    .any(|f| f.r_key <= r_near && f.lo <= lo && f.hi >= hi)
-        })
-    }
-
-    /// Adds one shrunk occluder to the horizon (see the module docs).
-    fn add(&mut self, o: &Shrunk) {
-        let s = self.s;
-        {
-            let (x0, x1, z0, z1) = (o.b.min.x, o.b.max.x, o.b.min.z, o.b.max.z);
-            let (bot, top) = (o.b.min.y, o.b.max.y);
-            let in_x = s.x > x0 && s.x < x1;
-            let in_z = s.z > z0 && s.z < z1;
-            if in_x && in_z {
-                let r_exit = (s.x - x0).min(x1 - s.x).min(s.z - z0).min(z1 - s.z);
-                if bot > s.y {
-                    self.ceilings.push(((bot - s.y) / r_exit, bot));
-                } else if top < s.y {
-                    self.floors.push(((top - s.y) / r_exit, top));
-                }
-                return;
-            }
-            if s.x >= x0 && s.x <= x1 && s.z >= z0 && s.z <= z1 {
-                return; // on the footprint's border
-            }
-            let (r_near, r_far) = rect_distances(s, x0, x1, z0, z1);
-            let (a0, a1) = angular_interval(s, x0, x1, z0, z1);
-            // Bins entirely inside [a0, a1], with a hair of safety.
-            let first = ceil_i64(a0 / BIN + 1e-9);
-            let last = floor_i64(a1 / BIN - 1e-9); // exclusive
-            // The loosest interval it can get in any bin.
-            let loose_lo = (bot - s.y) / if bot <= s.y { r_near } else { r_far };
-            let loose_hi = (top - s.y) / if top >= s.y { r_near } else { r_far };
-            let useless = |h: &Horizon, b: usize| {
-                h.closed[b] <= r_near
-                    || h.bins[b]
-                        .iter()
-                        .any(|f| f.r_key <= r_near && f.lo <= loose_lo && f.hi >= loose_hi)
-            };
-            if (first..last).all(|k| useless(self, bin_of(k))) {
-                return; // everything behind it is hidden already
-            }
-            // The front chain's corners (their distance bounds the entry
-            // distance over any azimuth range that contains them).
-            let mut corners: [(f64, f64); 3] = [(0.0, 0.0); 3];
-            let mut nc = 0;
-            let mut r_front: f64 = 0.0;
-            let mut front = |x: f64, z: f64| {
-                let r = ((x - s.x) * (x - s.x) + (z - s.z) * (z - s.z)).sqrt();
-                r_front = r_front.max(r);
-                let a = azimuth(x - s.x, z - s.z);
-                if !corners[..nc].iter().any(|c| c.1 == r && c.0 == a) && nc < 3 {
-                    corners[nc] = (a, r);
-                    nc += 1;
-                }
-            };
-            if s.x < x0 {
-                front(x0, z0);
-                front(x0, z1);
-            }
-            if s.x > x1 {
-                front(x1, z0);
-                front(x1, z1);
-            }
-            if s.z < z0 {
-                front(x0, z0);
-                front(x1, z0);
-            }
-            if s.z > z1 {
-                front(x0, z1);
-                front(x1, z1);
-            }
-            // Entry distance of the ray along bin boundary `k`: where it
-            // crosses the last of the front edges' lines (the rays of bins
-            // inside the occluder's interval all hit it).
-            let dirs = &self.dirs;
-            let entry = |k: i64| -> f64 {
-                let (ix, iz) = dirs[k.rem_euclid(BINS as i64) as usize];
-                let tx = if s.x < x0 {
-                    (x0 - s.x) * ix
-                } else if s.x > x1 {
-                    (x1 - s.x) * ix
-                } else {
-                    0.0
-                };
-                let tz = if s.z < z0 {
-                    (z0 - s.z) * iz
-                } else if s.z > z1 {
-                    (z1 - s.z) * iz
-                } else {
-                    0.0
-                };
-                let t = tx.max(tz);
-                // A ray grazing past (negative or infinite parameter)
-                // falls back to the chain's farthest corner.
-                if t.is_finite() && t > 0.0 {
-                    t
-                } else {
-                    f64::INFINITY
-                }
-            };
-            let [y_lo, y_hi] = self.y_range;
-            let corner_bins: [i64; 3] = [0, 1, 2].map(|i| {
-                if i < nc {
-                    floor_i64(corners[i].0 / BIN)
-                } else {
-                    i64::MIN
-                }
-            });
-            let mut r_next = entry(first);
-            for k in first..last {
-                let r_here = r_next;
-                r_next = entry(k + 1);
-                let b = bin_of(k);
-                if useless(self, b) {
-                    continue; // behind what already hides everything here
-                }
-                // Largest entry distance over the bin: at its ends or at a
-                // chain corner inside it (convex per edge).
-                let mut r_key = r_here.max(r_next);
-                for i in 0..nc {
-                    if corner_bins[i].rem_euclid(BINS as i64) == b as i64 {
-                        r_key = r_key.max(corners[i].1);
-                    }
-                }
-                let r_key = r_key.min(r_front) * (1.0 + 1e-12);
-                let (inv_key, inv_near) = (1.0 / r_key, 1.0 / r_near);
-                let lo = (bot - s.y) * if bot <= s.y { inv_key } else { inv_near };
-                let hi = (top - s.y) * if top >= s.y { inv_key } else { inv_near };
-                if lo.is_nan() || hi.is_nan() || lo > hi {
-                    continue;
-                }
-                let e = Entry { r_key, lo, hi };
-                let list = &mut self.bins[b];
-                if list
-                    .iter()
-                    .any(|f| f.r_key <= e.r_key && f.lo <= e.lo && f.hi >= e.hi)
-                {
-                    continue;
-                }
-                if list.is_empty() {
-                    self.touched.push(b as u32);
-                }
-                list.retain(|f| !(e.r_key <= f.r_key && e.lo <= f.lo && e.hi >= f.hi));
-                list.push(e);
-                // Beyond which distance does this entry alone hide every
-                // slope a scene point can have, `(y − y_s)/r` for y in the
-                // scene's height range?
-                let (a, b_) = (y_hi - s.y, y_lo - s.y);
-                let up = if a <= 0.0 {
-                    if e.hi >= 0.0 { 0.0 } else { f64::INFINITY }
-                } else if e.hi > 0.0 {
-                    a / e.hi
-                } else {
-                    f64::INFINITY
-                };
-                let down = if b_ >= 0.0 {
-                    if e.lo <= 0.0 { 0.0 } else { f64::INFINITY }
-                } else if e.lo < 0.0 {
-                    b_ / e.lo
-                } else {
-                    f64::INFINITY
-                };
-                let c = e.r_key.max(up).max(down) * (1.0 + 1e-12);
-                if c < self.closed[b] {
-                    self.closed[b] = c;
-                }
-            }
-        }
-    }
-
-    /// True when every segment from the sample to every point of `x` is
-    /// blocked (see the module docs).
-    fn hides(&self, x: &Aabb) -> bool {
-        let s = self.s;
-        let (x0, x1, z0, z1) = (x.min.x, x.max.x, x.min.z, x.max.z);
-        let (r_min, r_max) = rect_distances(s, x0, x1, z0, z1);
-        let r_max = r_max.max(1e-12);
-        let sig_max = if x.max.y >= s.y {
-            if r_min > 0.0 {
-                (x.max.y - s.y) / r_min
-            } else {
-                f64::INFINITY
-            }
-        } else {
-            (x.max.y - s.y) / r_max
-        };
-        let sig_min = if x.min.y <= s.y {
-            if r_min > 0.0 {
-                (x.min.y - s.y) / r_min
-            } else {
-                f64::NEG_INFINITY
-            }
-        } else {
-            (x.min.y - s.y) / r_max
-        };
-        let ceiling = self
-            .ceilings
-            .iter()
-            .filter(|c| c.1 <= x.min.y)
-            .map(|c| c.0)
-            .fold(f64::INFINITY, f64::min);
-        let floor = self
-            .floors
-            .iter()
-            .filter(|f| f.1 >= x.max.y)
-            .map(|f| f.0)
-            .fold(f64::NEG_INFINITY, f64::max);
-        if ceiling <= sig_min || floor >= sig_max {
-            return true;
-        }
-        let start = sig_min.max(floor);
-        let covered = |b: usize| {
-            if self.closed[b] <= r_min {
-                return true;
-            }
-            let list = &self.bins[b];
-            let mut cur = start;
-            for e in list {
-                if cur >= sig_max || cur >= ceiling {
-                    return true;
-                }
-                if e.r_key > r_min {
-                    continue;
-                }
-                if e.lo > cur {
-                    return false;
-                }
-                cur = cur.max(e.hi);
-            }
-            cur >= sig_max || cur >= ceiling
-        };
-        if r_min <= 0.0 {
-            return (0..BINS).all(covered);
-        }
-        let (a0, a1) = angular_interval(s, x0, x1, z0, z1);
-        let first = floor_i64(a0 / BIN);
-        let last = floor_i64(a1 / BIN);
-        (first..=last).all(|k| covered(bin_of(k)))
-    }
-}
-
 /// Marks the objects not hidden from the horizon's sample.
-/// `hidden` counts, per cluster, its objects not yet in `visible`.
+/// `seen` counts, per cluster, its objects in `visible`.
 fn mark_visible(
     hz: &Horizon,
     cell: &Aabb,
     scene: &Scene,
     h: &Hierarchy,
     visible: &mut ObjectSet,
-    hidden: &mut [u32],
+    seen: &mut [u32],
 ) {
     let meets = |b: &Aabb| b.min.cmple(cell.max).all() && cell.min.cmple(b.max).all();
     h.walk(|n, node| {
-        if hidden[n as usize] == 0 || (!meets(&node.aabb) && hz.hides(&node.aabb)) {
+        if seen[n as usize] == node.objects.1 - node.objects.0
+            || (!meets(&node.aabb) && hz.hides(&node.aabb))
+        {
             return false;
         }
         if node.children.is_none() {
@@ -784,7 +303,7 @@ fn mark_visible(
                     visible.insert(o);
                     let mut k = n;
                     while k != u32::MAX {
-                        hidden[k as usize] -= 1;
+                        seen[k as usize] += 1;
                         k = h.nodes[k as usize].parent;
                     }
                 }
@@ -831,11 +350,7 @@ mod tests {
         let wall = occ([10.0, 0.0, -20.0], [12.0, 20.0, 20.0]);
         let c = Conservative::new(&[wall], DVec3::splat(1e-6), 1.0);
         let mut hz = Horizon::new([-1.0, 1000.0]);
-        hz.build(
-            DVec3::new(0.0, 1.7, 0.0),
-            &c,
-            &vec![true; c.occluders.len()],
-        );
+        hz.build(DVec3::new(0.0, 1.7, 0.0), &c, |_| true);
         // Behind the wall, low: hidden.
         assert!(hz.hides(&Aabb::new(
             DVec3::new(20.0, 0.0, -1.0),
@@ -892,7 +407,7 @@ mod tests {
         let hides = |boxes: &[OccluderBox]| {
             let c = Conservative::new(boxes, DVec3::splat(1e-6), 1.0);
             let mut hz = Horizon::new([-1.0, 1000.0]);
-            hz.build(s, &c, &vec![true; c.occluders.len()]);
+            hz.build(s, &c, |_| true);
             hz.hides(&target)
         };
         let bridged = super::super::occluders::bridges(&[a, b]);
@@ -903,15 +418,52 @@ mod tests {
     }
 
     #[test]
+    fn occluders_covering_a_bin_from_its_two_ends_hide_what_is_behind_it() {
+        // Two walls at different distances, not touching: the near one's
+        // interval ends 0.6 of the way into bin 7, the far one's starts
+        // 0.4 of the way in, so neither covers the bin. A narrow target far
+        // behind, in the middle of the bin, is hidden by the two together.
+        let p = |f: f64| f * BIN;
+        // Diamond angle z / (x + z) in the first quadrant.
+        let z_at = |x: f64, a: f64| x * a / (1.0 - a);
+        let near = occ([10.0, 0.0, -20.0], [11.0, 20.0, z_at(10.0, p(7.6))]);
+        let far = occ([20.0, 0.0, z_at(21.0, p(7.4))], [21.0, 20.0, 40.0]);
+        let (dx, dz) = direction(p(7.5));
+        let (cx, cz) = (100.0 * dx, 100.0 * dz);
+        let target = Aabb::new(
+            DVec3::new(cx - 0.05, 0.0, cz - 0.05),
+            DVec3::new(cx + 0.05, 3.0, cz + 0.05),
+        );
+        let (a0, a1) = angular_interval(
+            DVec3::new(0.0, 1.7, 0.0),
+            cx - 0.05,
+            cx + 0.05,
+            cz - 0.05,
+            cz + 0.05,
+        );
+        assert!(a0 > p(7.0) && a1 < p(8.0), "the target lies in bin 7");
+        let hides = |boxes: &[OccluderBox]| {
+            let c = Conservative::new(boxes, DVec3::splat(1e-6), 1.0);
+            let mut hz = Horizon::new([-1.0, 1000.0]);
+            hz.build(DVec3::new(0.0, 1.7, 0.0), &c, |_| true);
+            hz.hides(&target)
+        };
+        assert!(super::super::occluders::bridges(&[near, far]).is_empty());
+        assert!(hides(&[near, far]));
+        assert!(!hides(&[near]));
+        assert!(!hides(&[far]));
+        // Parts from the same end do not fuse: a second wall ending where
+        // the near one does leaves the bin open.
+        let beside = occ([30.0, 0.0, -20.0], [31.0, 20.0, z_at(30.0, p(7.6))]);
+        assert!(!hides(&[near, beside]));
+    }
+
+    #[test]
     fn ceilings_hide_what_is_above_them() {
         let slab = occ([-20.0, 3.0, -20.0], [20.0, 3.5, 20.0]);
         let c = Conservative::new(&[slab], DVec3::splat(1e-6), 1.0);
         let mut hz = Horizon::new([-1.0, 1000.0]);
-        hz.build(
-            DVec3::new(0.0, 1.5, 0.0),
-            &c,
-            &vec![true; c.occluders.len()],
-        );
+        hz.build(DVec3::new(0.0, 1.5, 0.0), &c, |_| true);
         assert!(hz.hides(&Aabb::new(
             DVec3::new(-1.0, 5.0, -1.0),
             DVec3::new(1.0, 6.0, 1.0)
