@@ -412,6 +412,14 @@ impl Horizon {
                     i64::MIN
                 }
             });
+            // The slopes blocked beyond `r_key` (at least every entry
+            // distance of the rays at hand): `None` when none are.
+            let blocked = |r_key: f64| {
+                let (inv_key, inv_near) = (1.0 / r_key, 1.0 / r_near);
+                let lo = (bot - s.y) * if bot <= s.y { inv_key } else { inv_near };
+                let hi = (top - s.y) * if top >= s.y { inv_key } else { inv_near };
+                (!(lo.is_nan() || hi.is_nan() || lo > hi)).then_some(Entry { r_key, lo, hi })
+            };
             let mut r_next = entry(first);
             for k in first..last {
                 let r_here = r_next;
@@ -428,14 +436,9 @@ impl Horizon {
                         r_key = r_key.max(corners[i].1);
                     }
                 }
-                let r_key = r_key.min(r_front) * (1.0 + 1e-12);
-                let (inv_key, inv_near) = (1.0 / r_key, 1.0 / r_near);
-                let lo = (bot - s.y) * if bot <= s.y { inv_key } else { inv_near };
-                let hi = (top - s.y) * if top >= s.y { inv_key } else { inv_near };
-                if lo.is_nan() || hi.is_nan() || lo > hi {
-                    continue;
+                if let Some(e) = blocked(r_key.min(r_front) * (1.0 + 1e-12)) {
+                    self.insert(b, e);
                 }
-                self.insert(b, Entry { r_key, lo, hi });
             }
             self.dirs = dirs;
             // The bins its interval's ends fall in, covered only in part:
@@ -444,19 +447,15 @@ impl Horizon {
             // another occluder covering the rest of the bin.
             // (The bins just outside the full ones: each holds an end.)
             let (k0, k1) = (first - 1, last);
-            if k0 < k1 && r_front > 0.0 {
-                let r_key = r_front * (1.0 + 1e-12);
-                let (inv_key, inv_near) = (1.0 / r_key, 1.0 / r_near);
-                let lo = (bot - s.y) * if bot <= s.y { inv_key } else { inv_near };
-                let hi = (top - s.y) * if top >= s.y { inv_key } else { inv_near };
-                if !(lo.is_nan() || hi.is_nan() || lo > hi) {
-                    let e = Entry { r_key, lo, hi };
-                    if !useless(self, bin_of(k0)) {
-                        self.add_part(bin_of(k0), a0 - k0 as f64 * BIN, true, e);
-                    }
-                    if !useless(self, bin_of(k1)) {
-                        self.add_part(bin_of(k1), a1 - k1 as f64 * BIN, false, e);
-                    }
+            if k0 < k1
+                && r_front > 0.0
+                && let Some(e) = blocked(r_front * (1.0 + 1e-12))
+            {
+                if !useless(self, bin_of(k0)) {
+                    self.add_part(bin_of(k0), a0 - k0 as f64 * BIN, true, e);
+                }
+                if !useless(self, bin_of(k1)) {
+                    self.add_part(bin_of(k1), a1 - k1 as f64 * BIN, false, e);
                 }
             }
         }
