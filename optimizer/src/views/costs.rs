@@ -5,8 +5,7 @@
 use std::collections::VecDeque;
 
 use crate::math::enclosing::{Bounds, Enclosing, Overlap, enclosing_cone};
-use crate::math::geom::Sphere;
-use crate::math::geom::{Aabb, Vdi};
+use crate::math::geom::{Aabb, Sphere, Vdi};
 use crate::model::cost::Cost;
 use crate::scene::hierarchy::Hierarchy;
 use crate::views::KdNode;

@@ -54,11 +54,20 @@ struct Part {
     e: Entry,
 }
 
+/// Reciprocal components `(1/x, 1/z)` of the unit direction of every bin
+/// boundary `k·BIN`, `k = 0..=BINS` (infinite for a zero component): one
+/// table for every horizon.
+static DIRS: std::sync::LazyLock<Vec<(f64, f64)>> = std::sync::LazyLock::new(|| {
+    (0..=BINS)
+        .map(|k| {
+            let (x, z) = direction(k as f64 * BIN);
+            (1.0 / x, 1.0 / z)
+        })
+        .collect()
+});
+
 /// What occludes around one sample point.
 pub(super) struct Horizon {
-    /// Reciprocal components `(1/x, 1/z)` of the unit direction of every
-    /// bin boundary `k·BIN`, `k = 0..=BINS` (infinite for a zero component).
-    dirs: Vec<(f64, f64)>,
     s: DVec3,
     /// Lowest and highest point of the scene.
     y_range: [f64; 2],
@@ -202,12 +211,6 @@ fn bin_of(k: i64) -> usize {
 impl Horizon {
     pub(super) fn new(y_range: [f64; 2]) -> Horizon {
         Horizon {
-            dirs: (0..=BINS)
-                .map(|k| {
-                    let (x, z) = direction(k as f64 * BIN);
-                    (1.0 / x, 1.0 / z)
-                })
-                .collect(),
             s: DVec3::ZERO,
             y_range,
             bins: vec![Vec::new(); BINS],
@@ -379,7 +382,7 @@ impl Horizon {
             // Entry distance of the ray along bin boundary `k`: where it
             // crosses the last of the front edges' lines (the rays of bins
             // inside the occluder's interval all hit it).
-            let dirs = std::mem::take(&mut self.dirs);
+            let dirs: &[(f64, f64)] = &DIRS;
             let entry = |k: i64| -> f64 {
                 let (ix, iz) = dirs[k.rem_euclid(BINS as i64) as usize];
                 let tx = if s.x < x0 {
@@ -440,7 +443,6 @@ impl Horizon {
                     self.insert(b, e);
                 }
             }
-            self.dirs = dirs;
             // The bins its interval's ends fall in, covered only in part:
             // from the farthest corner of the front chain on (no ray of the
             // interval enters farther), each part is fused with a part of
