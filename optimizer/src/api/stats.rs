@@ -248,6 +248,14 @@ pub struct VisibilityStats {
     /// Conservative mode: how far occluders shrink per axis, metres.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub shrink_m: Option<[f64; 3]>,
+    /// Conservative mode: cells whose coarse set was computed (regions of
+    /// several cells use them; a cell's final set is its fine and coarse
+    /// sets intersected).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub coarse_cells_computed: Option<u64>,
+    /// Conservative mode: the coarse tier's sample points per cell per axis.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub coarse_samples_per_axis: Option<[u32; 3]>,
     /// Sampled mode: rays per cell.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub rays_per_cell: Option<u32>,

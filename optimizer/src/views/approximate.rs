@@ -451,6 +451,41 @@ fn sum_counts(a: Vec<PairCounts>, b: Vec<PairCounts>) -> Vec<PairCounts> {
     sum
 }
 
+/// The minimum-size VDIs of `open` (and within the pitch range) whose
+/// enclosing cones from `region` exceed the target with `costs`, found top
+/// down; `None` once the run is cancelled.
+fn problem_vdis(
+    ctx: &Context,
+    costs: &RegionCosts,
+    region: &Aabb,
+    open: &VdiSet,
+    levels: Levels,
+    cones: &mut u64,
+) -> Option<Vec<Vdi>> {
+    let mut problems: Vec<Vdi> = Vec::new();
+    let mut stack: Vec<Vdi> = (0..6u8).rev().map(Vdi::face).collect();
+    while let Some(vdi) = stack.pop() {
+        // A region near the kd tree's root sees most of the scene in every
+        // direction: its walks take a while, so a cancel is heard here too.
+        if ctx.cancelled() {
+            return None;
+        }
+        if !open.contains(&vdi) || !ctx.pitch_overlaps(&vdi) {
+            continue;
+        }
+        *cones += 1;
+        if !exceeds_target(ctx, costs, &enclosing_cone(region, &vdi, &ctx.lens)) {
+            continue;
+        }
+        if vdi.level == levels.leaf {
+            problems.push(vdi);
+        } else {
+            stack.extend(vdi.children().into_iter().rev());
+        }
+    }
+    Some(problems)
+}
+
 fn process(
     ctx: &Context,
     counters: &Counters,
@@ -464,30 +499,28 @@ fn process(
         return RegionResult::empty(0, 0, 0);
     }
     let region = node.aabb;
-    let costs = RegionCosts::of_kd(ctx, node, counters);
-    let open = VdiSet::with_ancestors(parent_problems, levels.leaf);
-    let mut problems: Vec<Vdi> = Vec::new();
     let mut cones = 0u64;
-    let mut stack: Vec<Vdi> = (0..6u8).rev().map(Vdi::face).collect();
-    while let Some(vdi) = stack.pop() {
-        // A region near the kd tree's root sees most of the scene in every
-        // direction: its walks take a while, so a cancel is heard here too.
-        if ctx.cancelled() {
+    let mut open = VdiSet::with_ancestors(parent_problems, levels.leaf);
+    // A single cell with a coarse visibility tier: its coarse set first,
+    // and only the problem views it leaves are tested with the final set.
+    let coarse = match node.children {
+        None => ctx.visibility.and_then(|v| v.coarse_cell(node.lo)),
+        Some(_) => None,
+    };
+    if let Some(set) = coarse {
+        let costs = RegionCosts::new(ctx, &region, Some(&set), counters);
+        let Some(problems) = problem_vdis(ctx, &costs, &region, &open, levels, &mut cones) else {
+            return RegionResult::empty(cones, 1, 0);
+        };
+        if problems.is_empty() {
             return RegionResult::empty(cones, 1, 0);
         }
-        if !open.contains(&vdi) || !ctx.pitch_overlaps(&vdi) {
-            continue;
-        }
-        cones += 1;
-        if !exceeds_target(ctx, &costs, &enclosing_cone(&region, &vdi, &ctx.lens)) {
-            continue;
-        }
-        if vdi.level == levels.leaf {
-            problems.push(vdi);
-        } else {
-            stack.extend(vdi.children().into_iter().rev());
-        }
+        open = VdiSet::with_ancestors(&problems, levels.leaf);
     }
+    let costs = RegionCosts::of_kd(ctx, node, counters);
+    let Some(mut problems) = problem_vdis(ctx, &costs, &region, &open, levels, &mut cones) else {
+        return RegionResult::empty(cones, 1, 0);
+    };
     if problems.is_empty() {
         return RegionResult::empty(cones, 1, 0);
     }

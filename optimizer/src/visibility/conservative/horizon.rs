@@ -283,17 +283,13 @@ impl Horizon {
                 }
             }
         }
-        for &t in &self.touched {
-            self.bins[t as usize].sort_by(|a, b| a.lo.total_cmp(&b.lo));
-        }
     }
 
     /// True when nothing inside footprint `rect` with heights `y`, at least
-    /// `r_near` away and seen from outside, could add a useful entry: in
-    /// every bin its angular interval touches, the bin is closed nearer
-    /// than `r_near` or an entry keyed nearer covers the loosest interval
-    /// any occluder there could get. (Skipping dominated entries changes
-    /// nothing: insertion discards them anyway.)
+    /// `r_near` away and seen from outside, could change what the horizon
+    /// hides: in every bin its angular interval touches, the entries keyed
+    /// nearer than `r_near` together block the whole slope range of the
+    /// box (see [`Horizon::covers`]).
     fn dominated(&self, rect: [f64; 4], y: [f64; 2], r_near: f64) -> bool {
         let s = self.s;
         let [x0, x1, z0, z1] = rect;
@@ -303,13 +299,38 @@ impl Horizon {
         let (a0, a1) = angular_interval(s, x0, x1, z0, z1);
         let first = floor_i64(a0 / BIN);
         let last = floor_i64(a1 / BIN);
-        (first..=last).all(|k| {
-            let b = bin_of(k);
-            self.closed[b] <= r_near
-                || self.bins[b]
-                    .iter()
-                    .any(|f| f.r_key <= r_near && f.lo <= lo && f.hi >= hi)
-        })
+        (first..=last).all(|k| self.covers(bin_of(k), r_near, lo, hi))
+    }
+
+    /// True when in bin `b` the entries keyed at most `r` together block
+    /// every slope of `[lo, hi]` (or the bin is closed by `r`).
+    ///
+    /// Then an occluder at least `r` away whose slopes seen from the
+    /// sample lie in `[lo, hi]` adds nothing to what the horizon hides:
+    /// each entry it could add (or fuse with another's part) blocks a
+    /// sub-interval of `[lo, hi]` keyed beyond `r`, already blocked for
+    /// every target that entry would apply to (and a bin it would close
+    /// beyond some distance is covered there already). So skipping it
+    /// changes no answer of [`Horizon::hides`], only the time.
+    fn covers(&self, b: usize, r: f64, lo: f64, hi: f64) -> bool {
+        if self.closed[b] <= r {
+            return true;
+        }
+        // Entries are kept sorted by their lower slope.
+        let mut cur = lo;
+        for e in &self.bins[b] {
+            if e.r_key > r {
+                continue;
+            }
+            if e.lo > cur {
+                return false;
+            }
+            cur = cur.max(e.hi);
+            if cur >= hi {
+                return true;
+            }
+        }
+        false
     }
 
     /// Adds one shrunk occluder to the horizon (see the module docs).
@@ -340,14 +361,11 @@ impl Horizon {
             // The loosest interval it can get in any bin.
             let loose_lo = (bot - s.y) / if bot <= s.y { r_near } else { r_far };
             let loose_hi = (top - s.y) / if top >= s.y { r_near } else { r_far };
-            let useless = |h: &Horizon, b: usize| {
-                h.closed[b] <= r_near
-                    || h.bins[b]
-                        .iter()
-                        .any(|f| f.r_key <= r_near && f.lo <= loose_lo && f.hi >= loose_hi)
-            };
-            if first < last && (first..last).all(|k| useless(self, bin_of(k))) {
-                return; // everything behind it is hidden already
+            let useless = |h: &Horizon, b: usize| h.covers(b, r_near, loose_lo, loose_hi);
+            // Everything behind it hidden already, in the bins its interval
+            // covers whole and in the two its ends fall in: nothing to add.
+            if (first - 1..=last).all(|k| useless(self, bin_of(k))) {
+                return;
             }
             // The front chain's corners (their distance bounds the entry
             // distance over any azimuth range that contains them).
@@ -522,7 +540,9 @@ impl Horizon {
             self.touched.push(b as u32);
         }
         list.retain(|f| !(e.r_key <= f.r_key && e.lo <= f.lo && e.hi >= f.hi));
-        list.push(e);
+        // Sorted by the lower slope (short lists: a linear search).
+        let at = list.iter().position(|f| f.lo > e.lo).unwrap_or(list.len());
+        list.insert(at, e);
         // Beyond which distance does this entry alone hide every
         // slope a scene point can have, `(y − y_s)/r` for y in the
         // scene's height range?
