@@ -313,6 +313,33 @@ fn mark_visible(
     });
 }
 
+/// True when the segment `a → b` meets box `o` grown by `pad` on every side
+/// (shrunk when negative): the brute force the tests check horizons with.
+#[cfg(test)]
+fn segment_meets(o: &Aabb, a: DVec3, b: DVec3, pad: f64) -> bool {
+    let d = b - a;
+    let (mut t0, mut t1): (f64, f64) = (0.0, 1.0);
+    for k in 0..3 {
+        let (lo, hi) = (o.min[k] - pad, o.max[k] + pad);
+        if d[k].abs() < 1e-15 {
+            if a[k] < lo || a[k] > hi {
+                return false;
+            }
+        } else {
+            let (mut u, mut v) = ((lo - a[k]) / d[k], (hi - a[k]) / d[k]);
+            if u > v {
+                std::mem::swap(&mut u, &mut v);
+            }
+            t0 = t0.max(u);
+            t1 = t1.min(v);
+            if t0 > t1 {
+                return false;
+            }
+        }
+    }
+    true
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -486,30 +513,10 @@ mod property {
     use crate::scene::{Object, Scene};
     use crate::visibility::occluders;
 
-    /// True when the open segment `a → b` passes through the interior of
-    /// box `o` (shrunk by a hair so that grazing does not count).
+    /// True when the segment `a → b` passes through the interior of box
+    /// `o` (shrunk by a hair so that grazing does not count).
     fn blocks(o: &Aabb, a: DVec3, b: DVec3) -> bool {
-        let d = b - a;
-        let (mut t0, mut t1): (f64, f64) = (1e-9, 1.0 - 1e-9);
-        for k in 0..3 {
-            let (lo, hi) = (o.min[k] + 1e-7, o.max[k] - 1e-7);
-            if d[k].abs() < 1e-15 {
-                if a[k] <= lo || a[k] >= hi {
-                    return false;
-                }
-            } else {
-                let (mut u, mut v) = ((lo - a[k]) / d[k], (hi - a[k]) / d[k]);
-                if u > v {
-                    std::mem::swap(&mut u, &mut v);
-                }
-                t0 = t0.max(u);
-                t1 = t1.min(v);
-                if t0 >= t1 {
-                    return false;
-                }
-            }
-        }
-        true
+        segment_meets(o, a, b, -1e-7)
     }
 
     fn random_scene(rng: &mut Rng) -> Scene {

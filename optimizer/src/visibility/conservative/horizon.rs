@@ -649,27 +649,7 @@ mod ends {
     /// True when the segment `a → b` meets the closed box `o` (grown by a
     /// hair: the horizon's own hairs are far smaller than the margin).
     fn meets(o: &Aabb, a: DVec3, b: DVec3) -> bool {
-        let d = b - a;
-        let (mut t0, mut t1): (f64, f64) = (0.0, 1.0);
-        for k in 0..3 {
-            let (lo, hi) = (o.min[k] - 1e-6, o.max[k] + 1e-6);
-            if d[k].abs() < 1e-15 {
-                if a[k] < lo || a[k] > hi {
-                    return false;
-                }
-            } else {
-                let (mut u, mut v) = ((lo - a[k]) / d[k], (hi - a[k]) / d[k]);
-                if u > v {
-                    std::mem::swap(&mut u, &mut v);
-                }
-                t0 = t0.max(u);
-                t1 = t1.min(v);
-                if t0 > t1 {
-                    return false;
-                }
-            }
-        }
-        true
+        super::super::segment_meets(o, a, b, 1e-6)
     }
 
     #[test]
