@@ -15,7 +15,9 @@
 //! tested again with its final set, the coarse and fine sets intersected
 //! (both conservative, so their intersection is). Every set a test uses
 //! holds the final set of each of its cells, so an evaluation that counts
-//! a view's final set never counts more than a test proved. The problem view approximation filters
+//! a view's final set never counts more than a test proved.
+//!
+//! The problem view approximation filters
 //! the objects of each region by its set before estimating times, and the
 //! independent evaluation filters each view by its cell's set, so a view's
 //! time never exceeds its problem view's estimate.
@@ -299,7 +301,7 @@ impl<'a> Visibility<'a> {
     /// True when regions of several cells use the cells' coarse sets (see
     /// the module docs).
     pub fn has_coarse_tier(&self) -> bool {
-        !self.coarse.is_empty()
+        matches!(self.source, Source::Conservative(_, Some(_)))
     }
 
     /// The coarse set of grid cell `c` (computed once), or `None` without a
@@ -401,21 +403,17 @@ impl<'a> Visibility<'a> {
         if cells.len() == 1 {
             return Some(self.cell(cells[0]).set.clone());
         }
+        // Computed in parallel; the union does not depend on the order.
+        let sets: Vec<Arc<ObjectSet>> = cells
+            .par_iter()
+            .map(|&c| {
+                self.coarse_cell(c)
+                    .unwrap_or_else(|| self.cell(c).set.clone())
+            })
+            .collect();
         let mut set = ObjectSet::new(self.scene.objects.len());
-        if self.has_coarse_tier() {
-            cells.par_iter().for_each(|&c| {
-                self.coarse_cell(c);
-            });
-            for c in cells {
-                if let Some(coarse) = self.coarse_cell(c) {
-                    set.union_with(&coarse);
-                }
-            }
-        } else {
-            self.prefetch(&cells);
-            for c in cells {
-                set.union_with(&self.cell(c).set);
-            }
+        for s in &sets {
+            set.union_with(s);
         }
         Some(Arc::new(set))
     }

@@ -607,27 +607,14 @@ impl Horizon {
         if ceiling <= sig_min || floor >= sig_max {
             return true;
         }
-        let start = sig_min.max(floor);
-        let covered = |b: usize| {
-            if self.closed[b] <= r_min {
-                return true;
-            }
-            let list = &self.bins[b];
-            let mut cur = start;
-            for e in list {
-                if cur >= sig_max || cur >= ceiling {
-                    return true;
-                }
-                if e.r_key > r_min {
-                    continue;
-                }
-                if e.lo > cur {
-                    return false;
-                }
-                cur = cur.max(e.hi);
-            }
-            cur >= sig_max || cur >= ceiling
-        };
+        // Above `floor` and below `ceiling`, the bins' entries must block
+        // the rest (an empty rest, a flat box at the sample's height, has
+        // no slope to block).
+        let (start, end) = (sig_min.max(floor), sig_max.min(ceiling));
+        if start >= end {
+            return true;
+        }
+        let covered = |b: usize| self.covers(b, r_min, start, end);
         if r_min <= 0.0 {
             return (0..BINS).all(covered);
         }
