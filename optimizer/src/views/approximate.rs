@@ -9,7 +9,7 @@ use crate::math::geom::{Aabb, Vdi};
 use crate::math::grid::Grid;
 use crate::views::context::{Context, Counters};
 use crate::views::costs::{
-    CellCuts, CpvCut, Listable, RegionCosts, cpv_cut, exceeds, exceeds_target,
+    CellCuts, CpvCut, Frontier, Listable, RegionCosts, cpv_cut, exceeds, exceeds_target,
 };
 use crate::views::{Cpv, KdNode, PairCounts, ProblemViews, leaf_level};
 
@@ -133,6 +133,38 @@ impl RegionResult {
     }
 }
 
+/// What the proofs of one minimum-size problem view's sub-directions and
+/// parts share: its cell's costs (closest distances, levels of detail,
+/// visible set: conservative for every part) and the clusters the problem
+/// view's own enclosing set does not exclude ([`Frontier`]): every view of
+/// a part in a sub-direction is a view of the problem view, so the others
+/// are seen by none, and each proof starts below the clusters that set
+/// cuts instead of at the root.
+struct Proofs<'a, 'c> {
+    ctx: &'a Context<'c>,
+    costs: &'a RegionCosts,
+    frontier: Frontier,
+}
+
+impl<'a, 'c> Proofs<'a, 'c> {
+    fn new(ctx: &'a Context<'c>, costs: &'a RegionCosts, region: &Aabb, vdi: &Vdi) -> Self {
+        let outer = enclosing_cone(region, vdi, &ctx.lens);
+        Proofs {
+            ctx,
+            costs,
+            frontier: Frontier::within(ctx, costs, &outer),
+        }
+    }
+
+    /// True when the enclosing time of (`region`, `d`), `region` in the
+    /// problem view's cell and `d` in its VDI, exceeds the target.
+    fn exceed(&self, region: &Aabb, d: &Vdi) -> bool {
+        let cone = enclosing_cone(region, d, &self.ctx.lens);
+        self.frontier
+            .exceeds(self.ctx, self.costs, &cone, self.ctx.t_max)
+    }
+}
+
 /// True when every part of (`region`, `vdi`) `levels` levels down (the VDI
 /// split in four per level, parts outside the pitch range skipped) has an
 /// enclosing time within the target, so no view of (`region`, `vdi`)
@@ -140,15 +172,14 @@ impl RegionResult {
 /// deepest level. The region's costs (closest distances, levels of detail,
 /// visible set) are its cell's.
 fn proven_by_refinement(
-    ctx: &Context,
-    costs: &RegionCosts,
+    p: &Proofs,
     region: &Aabb,
     vdi: &Vdi,
     levels: u8,
     cones: &mut u64,
     hint: &mut Hint,
 ) -> bool {
-    levels > 0 && !first_unproven(ctx, costs, region, vdi, levels, cones, hint)
+    levels > 0 && !first_unproven(p, region, vdi, levels, cones, hint)
 }
 
 /// Per quadtree level, the child (0..4) through which the last search of
@@ -159,8 +190,7 @@ type Hint = [u8; 32];
 /// [`unproven_directions`] stopping at the first unproven finest direction,
 /// trying first at each level the child `hint` names, which it updates.
 fn first_unproven(
-    ctx: &Context,
-    costs: &RegionCosts,
+    p: &Proofs,
     region: &Aabb,
     vdi: &Vdi,
     levels: u8,
@@ -172,14 +202,14 @@ fn first_unproven(
     let first = usize::from(hint[level]);
     for k in (0..4).map(|k| (k + first) % 4) {
         let child = &children[k];
-        if !ctx.pitch_overlaps(child) {
+        if !p.ctx.pitch_overlaps(child) {
             continue;
         }
         *cones += 1;
-        if !exceeds_target(ctx, costs, &enclosing_cone(region, child, &ctx.lens)) {
+        if !p.exceed(region, child) {
             continue;
         }
-        if levels == 1 || first_unproven(ctx, costs, region, child, levels - 1, cones, hint) {
+        if levels == 1 || first_unproven(p, region, child, levels - 1, cones, hint) {
             hint[level] = k as u8;
             return true;
         }
@@ -217,8 +247,7 @@ fn halves(b: &Aabb) -> Vec<Aabb> {
 /// `vdi`, exceeds the target. Lists them all in `out` ([`first_unproven`]
 /// stops at the first).
 fn unproven_directions(
-    ctx: &Context,
-    costs: &RegionCosts,
+    p: &Proofs,
     region: &Aabb,
     vdi: &Vdi,
     levels: u8,
@@ -227,15 +256,15 @@ fn unproven_directions(
 ) -> bool {
     let mut any = false;
     for child in vdi.children() {
-        if !ctx.pitch_overlaps(&child) {
+        if !p.ctx.pitch_overlaps(&child) {
             continue;
         }
         *cones += 1;
-        if !exceeds_target(ctx, costs, &enclosing_cone(region, &child, &ctx.lens)) {
+        if !p.exceed(region, &child) {
             continue;
         }
         any |= if levels > 1 {
-            unproven_directions(ctx, costs, region, &child, levels - 1, cones, out)
+            unproven_directions(p, region, &child, levels - 1, cones, out)
         } else {
             out.push(child);
             true
@@ -282,10 +311,10 @@ impl Parts {
     /// the next: it moves to the front of the list, so an unproven part is
     /// found unproven after fewer walks (the answer does not depend on the
     /// order).
-    fn proven(&mut self, ctx: &Context, costs: &RegionCosts, part: &Aabb, cones: &mut u64) -> bool {
+    fn proven(&mut self, p: &Proofs, part: &Aabb, cones: &mut u64) -> bool {
         let exceeding = self.directions.iter().position(|d| {
             *cones += 1;
-            exceeds_target(ctx, costs, &enclosing_cone(part, d, &ctx.lens))
+            p.exceed(part, d)
         });
         match exceeding {
             None => true,
@@ -316,8 +345,7 @@ impl Parts {
     /// placements after more walks: most parts are proven.)
     fn add(
         &mut self,
-        ctx: &Context,
-        costs: &RegionCosts,
+        p: &Proofs,
         region: &Aabb,
         vdi: &Vdi,
         levels: Levels,
@@ -326,52 +354,28 @@ impl Parts {
         let depth = levels.split;
         if self.covers(region) {
             // Only whether refinement proves the VDI matters now.
-            return !proven_by_refinement(
-                ctx,
-                costs,
-                region,
-                vdi,
-                levels.refine,
-                cones,
-                &mut self.hint,
-            );
+            return !proven_by_refinement(p, region, vdi, levels.refine, cones, &mut self.hint);
         }
         self.directions.clear();
-        if !unproven_directions(
-            ctx,
-            costs,
-            region,
-            vdi,
-            levels.refine,
-            cones,
-            &mut self.directions,
-        ) {
+        if !unproven_directions(p, region, vdi, levels.refine, cones, &mut self.directions) {
             // Refinement proves it from the whole cell.
             return false;
         }
         let mut found = false;
-        self.walk(ctx, costs, region, depth, &mut found, cones);
+        self.walk(p, region, depth, &mut found, cones);
         found
     }
 
-    fn walk(
-        &mut self,
-        ctx: &Context,
-        costs: &RegionCosts,
-        region: &Aabb,
-        depth: u8,
-        found: &mut bool,
-        cones: &mut u64,
-    ) {
+    fn walk(&mut self, p: &Proofs, region: &Aabb, depth: u8, found: &mut bool, cones: &mut u64) {
         for part in halves(region) {
             if *found && self.covers(&part) {
                 continue;
             }
-            if self.proven(ctx, costs, &part, cones) {
+            if self.proven(p, &part, cones) {
                 continue;
             }
             if depth > 1 {
-                self.walk(ctx, costs, &part, depth - 1, found, cones);
+                self.walk(p, &part, depth - 1, found, cones);
             } else {
                 *found = true;
                 self.record(part);
@@ -555,15 +559,15 @@ fn process(
             if levels.refine > 0 && levels.split > 0 {
                 problems.retain(|vdi| {
                     let l = deeper(vdi, &mut cones);
-                    parts.add(ctx, &costs, &region, vdi, l, &mut cones)
+                    let p = Proofs::new(ctx, &costs, &region, vdi);
+                    parts.add(&p, &region, vdi, l, &mut cones)
                 });
             } else {
                 let mut hint = [0; 32];
                 problems.retain(|vdi| {
                     let l = deeper(vdi, &mut cones);
-                    !proven_by_refinement(
-                        ctx, &costs, &region, vdi, l.refine, &mut cones, &mut hint,
-                    )
+                    let p = Proofs::new(ctx, &costs, &region, vdi);
+                    !proven_by_refinement(&p, &region, vdi, l.refine, &mut cones, &mut hint)
                 });
             }
             let refined = before - problems.len() as u64;
@@ -817,27 +821,18 @@ mod tests {
                 if !ctx.pitch_overlaps(&vdi) || !exceeds_target(&ctx, &costs, &cone) {
                     continue;
                 }
+                let p = Proofs::new(&ctx, &costs, &region, &vdi);
                 for levels in 1..=2u8 {
                     let cones = &mut 0;
                     let mut listed = Vec::new();
-                    let any = unproven_directions(
-                        &ctx,
-                        &costs,
-                        &region,
-                        &vdi,
-                        levels,
-                        cones,
-                        &mut listed,
-                    );
+                    let any = unproven_directions(&p, &region, &vdi, levels, cones, &mut listed);
                     assert_eq!(any, !listed.is_empty());
                     for start in 0..4u8 {
                         let mut hint = [start; 32];
-                        let first =
-                            first_unproven(&ctx, &costs, &region, &vdi, levels, cones, &mut hint);
+                        let first = first_unproven(&p, &region, &vdi, levels, cones, &mut hint);
                         assert_eq!(first, any, "{vdi:?}, {levels} levels, hint {start}");
                     }
-                    let first =
-                        first_unproven(&ctx, &costs, &region, &vdi, levels, cones, &mut carried);
+                    let first = first_unproven(&p, &region, &vdi, levels, cones, &mut carried);
                     assert_eq!(first, any, "{vdi:?}, {levels} levels, carried hint");
                     if any {
                         unproven += 1;

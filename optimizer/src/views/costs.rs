@@ -519,15 +519,34 @@ pub fn exceeds_target(ctx: &Context, costs: &RegionCosts, cone: &Enclosing) -> b
 
 /// [`exceeds_target`] against the frame time `t` instead of the target.
 pub fn exceeds(ctx: &Context, costs: &RegionCosts, cone: &Enclosing, t: f64) -> bool {
+    // A node with a child that costs nothing is skipped for its other
+    // child ([`RegionCosts::down`]): the same cost in a smaller sphere.
+    exceeds_from(ctx, costs, &[costs.down[0]], cone, t)
+}
+
+/// [`exceeds`] walking from the clusters `start` (disjoint subtrees)
+/// instead of the root: the objects outside them count nothing.
+fn exceeds_from(
+    ctx: &Context,
+    costs: &RegionCosts,
+    start: &[u32],
+    cone: &Enclosing,
+    t: f64,
+) -> bool {
     let h = ctx.hierarchy;
     let model = &ctx.model;
     let mut sum = Cost::default();
+    let margin = 1e-9 * model.frame_time(costs.nodes[0]).abs().max(1.0);
     // The whole costs of the clusters in the queue.
-    let mut pending = costs.nodes[0];
-    let margin = 1e-9 * model.frame_time(pending).abs().max(1.0);
-    // A node with a child that costs nothing is skipped for its other
-    // child ([`RegionCosts::down`]): the same cost in a smaller sphere.
-    let mut queue = VecDeque::from([(costs.down[0], cone.all_bounds())]);
+    let mut pending = Cost::default();
+    let all = cone.all_bounds();
+    let mut queue: VecDeque<(u32, Bounds)> = start
+        .iter()
+        .map(|&n| {
+            pending += costs.nodes[n as usize];
+            (n, all)
+        })
+        .collect();
     while let Some((n, mask)) = queue.pop_front() {
         let whole = costs.nodes[n as usize];
         pending = pending - whole;
@@ -557,6 +576,63 @@ pub fn exceeds(ctx: &Context, costs: &RegionCosts, cone: &Enclosing, t: f64) -> 
         }
     }
     false
+}
+
+/// Where only views inside an outer enclosing set matter (the proofs of a
+/// problem view's parts and sub-directions, every view of which is a view
+/// of the problem view), the clusters a walk starts from: those the outer
+/// set holds whole, and the leaves it cuts. A cluster outside the outer set
+/// is seen by none of those views, so a walk from here counts what a walk
+/// from the root counts, less what the outer set excludes, without testing
+/// again every cluster above the outer set's boundary.
+pub struct Frontier {
+    /// Disjoint subtrees, in breadth-first order.
+    nodes: Vec<u32>,
+}
+
+impl Frontier {
+    /// The clusters `outer` does not exclude, found breadth first as
+    /// [`exceeds`] walks (zero-cost clusters skipped, [`RegionCosts::down`]
+    /// followed).
+    pub fn within(ctx: &Context, costs: &RegionCosts, outer: &Enclosing) -> Frontier {
+        let h = ctx.hierarchy;
+        let mut nodes = Vec::new();
+        let mut queue = VecDeque::from([(costs.down[0], outer.all_bounds())]);
+        while let Some((n, mask)) = queue.pop_front() {
+            if costs.nodes[n as usize] == Cost::default() {
+                continue;
+            }
+            let s = costs.sphere(h, n);
+            match outer.classify_within(s.center, s.radius, mask) {
+                (Overlap::Outside, _) => {}
+                (Overlap::Inside, _) => nodes.push(n),
+                (Overlap::Partial, left) => match h.nodes[n as usize].children {
+                    None => nodes.push(n),
+                    Some([l, r]) => {
+                        queue.push_back((costs.down[l as usize], left));
+                        queue.push_back((costs.down[r as usize], left));
+                    }
+                },
+            }
+        }
+        Frontier { nodes }
+    }
+
+    /// [`exceeds`] counting only the objects below the frontier: for a set
+    /// whose views are all views of the outer set, an upper bound of every
+    /// such view's cost as [`exceeds`]'s is.
+    pub fn exceeds(&self, ctx: &Context, costs: &RegionCosts, cone: &Enclosing, t: f64) -> bool {
+        exceeds_from(ctx, costs, &self.nodes, cone, t)
+    }
+
+    /// True when object `o` is below the frontier.
+    #[cfg(test)]
+    fn holds(&self, h: &Hierarchy, o: u32) -> bool {
+        let leaf = h.leaf_of[o as usize];
+        self.nodes
+            .iter()
+            .any(|&a| a <= leaf && leaf < h.nodes[a as usize].subtree_end)
+    }
 }
 
 /// What a CPV of (`region`, `vdi`) lists ([`CpvCut`]), `listable` being
@@ -655,6 +731,83 @@ mod tests {
             }
         }
         assert!(sets > 100 && above > 0 && below > 0);
+    }
+
+    /// A frontier within a cell's enclosing set for a VDI holds every
+    /// object an exact view from the cell with a direction in the VDI sees
+    /// (its sphere meets the view's frustum) and leaves others out, so the
+    /// check could fail; and a walk from it never finds a part of the cell
+    /// in a sub-direction above a threshold where the walk from the root
+    /// finds it within (it counts a subset), for thresholds on both sides
+    /// of each set's time, both answers occurring.
+    #[test]
+    fn a_frontier_holds_what_its_views_see() {
+        use crate::math::geom::ViewFrustum;
+        use glam::DVec3;
+        let scene = crate::testutil::synthetic_city(5, 6, 6);
+        let job = crate::testutil::synthetic_job(6, 6);
+        let h = Hierarchy::build(&scene);
+        let ctx = Context::new(&scene, &h, None, &job, Control::default());
+        let grid = job.grid();
+        let level = leaf_level(job.problem_views.min_vdi_deg);
+        let mut rng = crate::math::rng::Rng::new(7);
+        let (mut seen, mut left_out, mut above, mut below) = (0usize, 0usize, 0usize, 0usize);
+        for (i, j) in [(0, 0), (2, 1), (5, 3), (3, 5)] {
+            let region = grid.cell_box([i, 0, j], [i + 1, 1, j + 1]);
+            let costs = RegionCosts::new(&ctx, &region, None, &Counters::new());
+            for vdi in Vdi::all_at(level) {
+                if !ctx.pitch_overlaps(&vdi) {
+                    continue;
+                }
+                let outer = enclosing_cone(&region, &vdi, &ctx.lens);
+                let f = Frontier::within(&ctx, &costs, &outer);
+                let n = scene.objects.len() as u32;
+                left_out += (0..n).filter(|&o| !f.holds(&h, o)).count();
+                let corners = vdi.corner_dirs();
+                for _ in 0..6 {
+                    let u = DVec3::new(rng.f64(), rng.f64(), rng.f64());
+                    let eye = region.min + (region.max - region.min) * u;
+                    // A positive combination of the corners' directions
+                    // lies in the VDI.
+                    let dir = corners
+                        .iter()
+                        .fold(DVec3::ZERO, |a, &c| a + c * (0.05 + rng.f64()))
+                        .normalize();
+                    if !ctx.in_pitch(dir) {
+                        continue;
+                    }
+                    let view = ViewFrustum::new(eye, dir, ctx.lens.fov_deg, ctx.lens.aspect);
+                    for o in 0..n {
+                        let s = &h.object_spheres[o as usize];
+                        if view.distance(s.center) <= s.radius {
+                            seen += 1;
+                            assert!(f.holds(&h, o), "object {o} seen from {eye:?} along {dir:?}");
+                        }
+                    }
+                }
+                let mut lower = region;
+                lower.max.x = region.center().x;
+                for part in [region, lower] {
+                    for d in vdi.children() {
+                        let cone = enclosing_cone(&part, &d, &ctx.lens);
+                        let t = ctx
+                            .model
+                            .frame_time(enclosed_cost(&ctx, &costs, &cone, &part, None));
+                        for k in [0.9, 1.0 - 1e-6, 1.0 + 1e-6, 1.1] {
+                            let from_frontier = f.exceeds(&ctx, &costs, &cone, t * k);
+                            assert!(!from_frontier || exceeds(&ctx, &costs, &cone, t * k));
+                            above += usize::from(from_frontier);
+                            below += usize::from(!from_frontier);
+                        }
+                    }
+                }
+            }
+        }
+        assert!(
+            seen > 1000 && left_out > 1000,
+            "{seen} seen, {left_out} left out"
+        );
+        assert!(above > 0 && below > 0, "{above} above, {below} below");
     }
 
     /// Costs with a visible set, computed in pooled buffers for the visible
