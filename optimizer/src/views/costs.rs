@@ -701,36 +701,44 @@ mod tests {
     /// whatever order the hierarchy is visited in.
     #[test]
     fn exceeds_answers_as_the_full_sum() {
+        let (mut above, mut below, mut sets) = (0, 0, 0);
+        with_test_cells(|ctx, region, costs, vdi| {
+            let cone = enclosing_cone(region, vdi, &ctx.lens);
+            let t = ctx
+                .model
+                .frame_time(enclosed_cost(ctx, costs, &cone, region, None));
+            sets += 1;
+            for f in [0.5, 0.9, 1.0 - 1e-6, 1.0 + 1e-6, 1.1, 2.0] {
+                let threshold = t * f;
+                let full = t > threshold;
+                assert_eq!(
+                    exceeds(ctx, costs, &cone, threshold),
+                    full,
+                    "{vdi:?} from {region:?}: {t} ms against {threshold}"
+                );
+                above += usize::from(full);
+                below += usize::from(!full);
+            }
+        });
+        assert!(sets > 100 && above > 0 && below > 0);
+    }
+
+    /// Calls `f` for every leaf VDI of four cells of a synthetic city (all
+    /// its objects potentially visible), with the cell's costs.
+    fn with_test_cells(mut f: impl FnMut(&Context, &Aabb, &RegionCosts, &Vdi)) {
         let scene = crate::testutil::synthetic_city(5, 6, 6);
         let job = crate::testutil::synthetic_job(6, 6);
         let h = Hierarchy::build(&scene);
         let ctx = Context::new(&scene, &h, None, &job, Control::default());
         let grid = job.grid();
         let level = leaf_level(job.problem_views.min_vdi_deg);
-        let (mut above, mut below, mut sets) = (0, 0, 0);
         for (i, j) in [(0, 0), (2, 1), (5, 3), (3, 5)] {
             let region = grid.cell_box([i, 0, j], [i + 1, 1, j + 1]);
             let costs = RegionCosts::new(&ctx, &region, None, &Counters::new());
             for vdi in Vdi::all_at(level) {
-                let cone = enclosing_cone(&region, &vdi, &ctx.lens);
-                let t = ctx
-                    .model
-                    .frame_time(enclosed_cost(&ctx, &costs, &cone, &region, None));
-                sets += 1;
-                for f in [0.5, 0.9, 1.0 - 1e-6, 1.0 + 1e-6, 1.1, 2.0] {
-                    let threshold = t * f;
-                    let full = t > threshold;
-                    assert_eq!(
-                        exceeds(&ctx, &costs, &cone, threshold),
-                        full,
-                        "{vdi:?} from {region:?}: {t} ms against {threshold}"
-                    );
-                    above += usize::from(full);
-                    below += usize::from(!full);
-                }
+                f(&ctx, &region, &costs, &vdi);
             }
         }
-        assert!(sets > 100 && above > 0 && below > 0);
     }
 
     /// A frontier within a cell's enclosing set for a VDI holds every
@@ -744,65 +752,56 @@ mod tests {
     fn a_frontier_holds_what_its_views_see() {
         use crate::math::geom::ViewFrustum;
         use glam::DVec3;
-        let scene = crate::testutil::synthetic_city(5, 6, 6);
-        let job = crate::testutil::synthetic_job(6, 6);
-        let h = Hierarchy::build(&scene);
-        let ctx = Context::new(&scene, &h, None, &job, Control::default());
-        let grid = job.grid();
-        let level = leaf_level(job.problem_views.min_vdi_deg);
         let mut rng = crate::math::rng::Rng::new(7);
         let (mut seen, mut left_out, mut above, mut below) = (0usize, 0usize, 0usize, 0usize);
-        for (i, j) in [(0, 0), (2, 1), (5, 3), (3, 5)] {
-            let region = grid.cell_box([i, 0, j], [i + 1, 1, j + 1]);
-            let costs = RegionCosts::new(&ctx, &region, None, &Counters::new());
-            for vdi in Vdi::all_at(level) {
-                if !ctx.pitch_overlaps(&vdi) {
+        with_test_cells(|ctx, region, costs, vdi| {
+            if !ctx.pitch_overlaps(vdi) {
+                return;
+            }
+            let h = ctx.hierarchy;
+            let outer = enclosing_cone(region, vdi, &ctx.lens);
+            let f = Frontier::within(ctx, costs, &outer);
+            let n = ctx.scene.objects.len() as u32;
+            left_out += (0..n).filter(|&o| !f.holds(h, o)).count();
+            let corners = vdi.corner_dirs();
+            for _ in 0..6 {
+                let u = DVec3::new(rng.f64(), rng.f64(), rng.f64());
+                let eye = region.min + (region.max - region.min) * u;
+                // A positive combination of the corners' directions lies
+                // in the VDI.
+                let dir = corners
+                    .iter()
+                    .fold(DVec3::ZERO, |a, &c| a + c * (0.05 + rng.f64()))
+                    .normalize();
+                if !ctx.in_pitch(dir) {
                     continue;
                 }
-                let outer = enclosing_cone(&region, &vdi, &ctx.lens);
-                let f = Frontier::within(&ctx, &costs, &outer);
-                let n = scene.objects.len() as u32;
-                left_out += (0..n).filter(|&o| !f.holds(&h, o)).count();
-                let corners = vdi.corner_dirs();
-                for _ in 0..6 {
-                    let u = DVec3::new(rng.f64(), rng.f64(), rng.f64());
-                    let eye = region.min + (region.max - region.min) * u;
-                    // A positive combination of the corners' directions
-                    // lies in the VDI.
-                    let dir = corners
-                        .iter()
-                        .fold(DVec3::ZERO, |a, &c| a + c * (0.05 + rng.f64()))
-                        .normalize();
-                    if !ctx.in_pitch(dir) {
-                        continue;
-                    }
-                    let view = ViewFrustum::new(eye, dir, ctx.lens.fov_deg, ctx.lens.aspect);
-                    for o in 0..n {
-                        let s = &h.object_spheres[o as usize];
-                        if view.distance(s.center) <= s.radius {
-                            seen += 1;
-                            assert!(f.holds(&h, o), "object {o} seen from {eye:?} along {dir:?}");
-                        }
-                    }
-                }
-                let mut lower = region;
-                lower.max.x = region.center().x;
-                for part in [region, lower] {
-                    for d in vdi.children() {
-                        let cone = enclosing_cone(&part, &d, &ctx.lens);
-                        let t = ctx
-                            .model
-                            .frame_time(enclosed_cost(&ctx, &costs, &cone, &part, None));
-                        for k in [0.9, 1.0 - 1e-6, 1.0 + 1e-6, 1.1] {
-                            let from_frontier = f.exceeds(&ctx, &costs, &cone, t * k);
-                            assert!(!from_frontier || exceeds(&ctx, &costs, &cone, t * k));
-                            above += usize::from(from_frontier);
-                            below += usize::from(!from_frontier);
-                        }
+                let view = ViewFrustum::new(eye, dir, ctx.lens.fov_deg, ctx.lens.aspect);
+                for o in 0..n {
+                    let s = &h.object_spheres[o as usize];
+                    if view.distance(s.center) <= s.radius {
+                        seen += 1;
+                        assert!(f.holds(h, o), "object {o} seen from {eye:?} along {dir:?}");
                     }
                 }
             }
-        }
+            let mut lower = *region;
+            lower.max.x = region.center().x;
+            for part in [*region, lower] {
+                for d in vdi.children() {
+                    let cone = enclosing_cone(&part, &d, &ctx.lens);
+                    let t = ctx
+                        .model
+                        .frame_time(enclosed_cost(ctx, costs, &cone, &part, None));
+                    for k in [0.9, 1.0 - 1e-6, 1.0 + 1e-6, 1.1] {
+                        let from_frontier = f.exceeds(ctx, costs, &cone, t * k);
+                        assert!(!from_frontier || exceeds(ctx, costs, &cone, t * k));
+                        above += usize::from(from_frontier);
+                        below += usize::from(!from_frontier);
+                    }
+                }
+            }
+        });
         assert!(
             seen > 1000 && left_out > 1000,
             "{seen} seen, {left_out} left out"
