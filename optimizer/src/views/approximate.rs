@@ -4,12 +4,12 @@
 use rayon::prelude::*;
 
 use crate::api::job::Job;
-use crate::math::enclosing::enclosing_cone;
+use crate::math::enclosing::{Enclosing, enclosing_cone};
 use crate::math::geom::{Aabb, Vdi};
 use crate::math::grid::Grid;
 use crate::views::context::{Context, Counters};
 use crate::views::costs::{
-    CellCuts, CpvCut, Frontier, Listable, RegionCosts, cpv_cut, exceeds, exceeds_target,
+    CellCuts, CpvCut, Frontier, Listable, RegionCosts, cpv_cut, exceeds_target,
 };
 use crate::views::{Cpv, KdNode, PairCounts, ProblemViews, leaf_level};
 
@@ -143,17 +143,27 @@ impl RegionResult {
 struct Proofs<'a, 'c> {
     ctx: &'a Context<'c>,
     costs: &'a RegionCosts,
+    /// The problem view's own enclosing set.
+    outer: Enclosing,
     frontier: Frontier,
 }
 
 impl<'a, 'c> Proofs<'a, 'c> {
     fn new(ctx: &'a Context<'c>, costs: &'a RegionCosts, region: &Aabb, vdi: &Vdi) -> Self {
         let outer = enclosing_cone(region, vdi, &ctx.lens);
+        let frontier = Frontier::within(ctx, costs, &outer);
         Proofs {
             ctx,
             costs,
-            frontier: Frontier::within(ctx, costs, &outer),
+            outer,
+            frontier,
         }
+    }
+
+    /// True when the problem view's own enclosing time exceeds `t` (the
+    /// frontier holds everything its set does not exclude).
+    fn exceeds_own(&self, t: f64) -> bool {
+        self.frontier.exceeds(self.ctx, self.costs, &self.outer, t)
     }
 
     /// True when the enclosing time of (`region`, `d`), `region` in the
@@ -542,31 +552,28 @@ fn process(
             // refined one level deeper: there refinement may still prove
             // it, where one far above is a real problem (the deeper level
             // would cost four times the cones for nothing).
-            let deeper = |vdi: &Vdi, cones: &mut u64| {
-                if levels.refine == 0 {
-                    return levels;
-                }
+            let deeper = |p: &Proofs, cones: &mut u64| {
                 *cones += 1;
-                let cone = enclosing_cone(&region, vdi, &ctx.lens);
                 let near = ctx.t_max * (1.0 + levels.near_target);
-                let refine = if !exceeds(ctx, &costs, &cone, near) {
+                let refine = if !p.exceeds_own(near) {
                     levels.refine + 1
                 } else {
                     levels.refine
                 };
                 Levels { refine, ..levels }
             };
+            // Without refinement nothing is proven here.
             if levels.refine > 0 && levels.split > 0 {
                 problems.retain(|vdi| {
-                    let l = deeper(vdi, &mut cones);
                     let p = Proofs::new(ctx, &costs, &region, vdi);
+                    let l = deeper(&p, &mut cones);
                     parts.add(&p, &region, vdi, l, &mut cones)
                 });
-            } else {
+            } else if levels.refine > 0 {
                 let mut hint = [0; 32];
                 problems.retain(|vdi| {
-                    let l = deeper(vdi, &mut cones);
                     let p = Proofs::new(ctx, &costs, &region, vdi);
+                    let l = deeper(&p, &mut cones);
                     !proven_by_refinement(&p, &region, vdi, l.refine, &mut cones, &mut hint)
                 });
             }
