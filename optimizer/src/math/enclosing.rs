@@ -85,6 +85,37 @@ impl SidePlanes {
             h: planes.map(|(_, h)| h),
         }
     }
+
+    /// The planes the sphere `(c, r)` lies wholly beyond, and those it lies
+    /// wholly within, as bit masks: every plane at once, without branches
+    /// (the loop vectorises, in the arithmetic of `n.dot(c) - h`), the
+    /// caller reading only those it needs (less work than visiting them
+    /// one by one with a branch each).
+    #[inline]
+    fn masks(&self, c: DVec3, r: f64) -> (u32, u32) {
+        let (mut beyond, mut within) = (0u32, 0u32);
+        for k in 0..SIDE_PLANES {
+            let d = self.distance(k, c);
+            beyond |= u32::from(d > r) << k;
+            within |= u32::from(d <= -r) << k;
+        }
+        (beyond, within)
+    }
+
+    /// The first of [`masks`](Self::masks) alone.
+    #[inline]
+    fn beyond(&self, c: DVec3, r: f64) -> u32 {
+        let mut beyond = 0u32;
+        for k in 0..SIDE_PLANES {
+            beyond |= u32::from(self.distance(k, c) > r) << k;
+        }
+        beyond
+    }
+
+    #[inline]
+    fn distance(&self, k: usize, c: DVec3) -> f64 {
+        self.x[k] * c.x + self.y[k] * c.y + self.z[k] * c.z - self.h[k]
+    }
 }
 
 /// Where a sphere lies with respect to an [`Enclosing`] set.
@@ -136,17 +167,7 @@ impl Enclosing {
         let mut left = mask;
         let side = mask & SIDE_MASK;
         if side != 0 {
-            // Every side plane at once, without branches (the loop
-            // vectorises, in the arithmetic of `n.dot(c) - h`), then only
-            // those of `mask` are read (less work than visiting the planes
-            // of `mask` one by one with a branch each).
-            let p = &self.sides;
-            let (mut beyond, mut within) = (0u32, 0u32);
-            for k in 0..SIDE_PLANES {
-                let d = p.x[k] * c.x + p.y[k] * c.y + p.z[k] * c.z - p.h[k];
-                beyond |= u32::from(d > r) << k;
-                within |= u32::from(d <= -r) << k;
-            }
+            let (beyond, within) = self.sides.masks(c, r);
             if beyond & side != 0 {
                 return (Overlap::Outside, 0);
             }
@@ -191,6 +212,38 @@ impl Enclosing {
         }
     }
 
+    /// True when the sphere `(c, r)` may meet the set, testing only the
+    /// bounds of `mask`: exactly when [`classify_within`](Self::classify_within)
+    /// does not answer [`Overlap::Outside`], without working out which
+    /// bounds the sphere lies inside.
+    pub fn meets_within(&self, c: DVec3, r: f64, mask: Bounds) -> bool {
+        if self.cone.all {
+            return true;
+        }
+        if mask & SIDE_MASK != 0 && self.sides.beyond(c, r) & mask & SIDE_MASK != 0 {
+            return false;
+        }
+        if mask & (1 << FLOOR_BIT) != 0
+            && (c - self.cone.apex).dot(self.cone.axis) - self.cone.floor + r < 0.0
+        {
+            return false;
+        }
+        if mask & (1 << CONE_BIT) != 0 && self.cone.sphere_side(c, r, false).1 {
+            return false;
+        }
+        if let Some(excluded) = &self.excluded {
+            let mut m = mask >> EXCLUDED_BIT;
+            while m != 0 {
+                let k = m.trailing_zeros();
+                m &= m - 1;
+                if excluded[k as usize].sphere_within(c, r) {
+                    return false;
+                }
+            }
+        }
+        true
+    }
+
     /// Where the sphere `(c, r)` lies, in one pass over the set's bounds.
     pub fn classify(&self, c: DVec3, r: f64) -> Overlap {
         self.classify_within(c, r, self.all_bounds()).0
@@ -198,7 +251,7 @@ impl Enclosing {
 
     /// True when the sphere `(c, r)` may meet the set (conservative).
     pub fn intersects_sphere(&self, c: DVec3, r: f64) -> bool {
-        self.classify(c, r) != Overlap::Outside
+        self.meets_within(c, r, self.all_bounds())
     }
 }
 
@@ -338,13 +391,14 @@ mod tests {
     /// inside it: classifying a sphere inside another with those bounds
     /// answers as testing every bound does.
     #[test]
-    fn bounds_passed_down_answer_as_every_bound() {
+    fn bounds_passed_down_answer_as_every_bound_and_meeting_as_classifying() {
         let mut rng = Rng::new(5);
         let lens = Lens {
             fov_deg: 45.0,
             aspect: 1.5,
         };
         let mut seen = [0usize; 3];
+        let mut meets_seen = [0usize; 2];
         for _ in 0..200 {
             let lo = rng.in_box(DVec3::splat(-50.0), DVec3::splat(50.0));
             let ext = DVec3::new(
@@ -375,9 +429,22 @@ mod tests {
                     Overlap::Partial => set.classify_within(child, cr, left).0,
                 };
                 assert_eq!(passed, full, "sphere {child} r {cr} in {c} r {r}");
+                // The test of whether a sphere meets the set answers as the
+                // classification does, with every bound and with those
+                // passed down.
+                assert_eq!(
+                    set.meets_within(c, r, set.all_bounds()),
+                    overlap != Overlap::Outside
+                );
+                if overlap == Overlap::Partial {
+                    let meets = set.meets_within(child, cr, left);
+                    assert_eq!(meets, full != Overlap::Outside, "sphere {child} r {cr}");
+                    meets_seen[usize::from(meets)] += 1;
+                }
                 seen[overlap as usize] += 1;
             }
         }
         assert!(seen.iter().all(|&k| k > 100), "{seen:?}");
+        assert!(meets_seen.iter().all(|&k| k > 100), "{meets_seen:?}");
     }
 }

@@ -450,6 +450,17 @@ impl Cone {
         (false, q < 0.0 || above(perp2 * self.cos2, q * q))
     }
 
+    /// The first answer of [`sphere_side`](Self::sphere_side) with
+    /// `or_equal`: the sphere lies inside the cone (distance at most −r).
+    #[inline]
+    pub fn sphere_within(&self, c: DVec3, r: f64) -> bool {
+        let v = c - self.apex;
+        let par = v.dot(self.axis);
+        let w = v - self.axis * par;
+        let q = par * self.sin - r;
+        q >= 0.0 && w.dot(w) * self.cos2 <= q * q
+    }
+
     /// True when the sphere `(c, r)` may meet the cone: it meets the cone
     /// and reaches the floor plane's far side (conservative: a sphere that
     /// meets both only outside their intersection is also accepted).
@@ -621,6 +632,7 @@ mod tests {
             }
             for or_equal in [false, true] {
                 let (w, b) = cone.sphere_side(c, r, or_equal);
+                assert_eq!(cone.sphere_within(c, r), w);
                 assert_eq!(w, d <= -r, "within: d {d}, r {r}");
                 assert_eq!(b, d > r, "beyond: d {d}, r {r}");
                 within += usize::from(w);

@@ -292,7 +292,7 @@ fn leaf_cost(ctx: &Context, costs: &RegionCosts, cone: &Enclosing, n: u32, mask:
             continue;
         }
         let s = &h.object_spheres[o as usize];
-        if cone.classify_within(s.center, s.radius, mask).0 != Overlap::Outside {
+        if cone.meets_within(s.center, s.radius, mask) {
             c += costs.objects[o as usize];
         }
     }
