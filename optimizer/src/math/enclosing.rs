@@ -112,6 +112,7 @@ impl SidePlanes {
         beyond
     }
 
+    /// Signed distance of `c` beyond plane `k`.
     #[inline]
     fn distance(&self, k: usize, c: DVec3) -> f64 {
         self.x[k] * c.x + self.y[k] * c.y + self.z[k] * c.z - self.h[k]
@@ -174,7 +175,7 @@ impl Enclosing {
             left &= !(within & side);
         }
         if mask & (1 << FLOOR_BIT) != 0 {
-            let f = (c - self.cone.apex).dot(self.cone.axis) - self.cone.floor;
+            let f = self.floor_distance(c);
             if f + r < 0.0 {
                 return (Overlap::Outside, 0);
             }
@@ -223,9 +224,7 @@ impl Enclosing {
         if mask & SIDE_MASK != 0 && self.sides.beyond(c, r) & mask & SIDE_MASK != 0 {
             return false;
         }
-        if mask & (1 << FLOOR_BIT) != 0
-            && (c - self.cone.apex).dot(self.cone.axis) - self.cone.floor + r < 0.0
-        {
+        if mask & (1 << FLOOR_BIT) != 0 && self.floor_distance(c) + r < 0.0 {
             return false;
         }
         if mask & (1 << CONE_BIT) != 0 && self.cone.sphere_side(c, r, false).1 {
@@ -242,6 +241,12 @@ impl Enclosing {
             }
         }
         true
+    }
+
+    /// Signed distance of `c` beyond the floor plane, into the set.
+    #[inline]
+    fn floor_distance(&self, c: DVec3) -> f64 {
+        (c - self.cone.apex).dot(self.cone.axis) - self.cone.floor
     }
 
     /// Where the sphere `(c, r)` lies, in one pass over the set's bounds.
@@ -389,7 +394,8 @@ mod tests {
 
     /// A walk passes the bounds a sphere straddles down to the spheres
     /// inside it: classifying a sphere inside another with those bounds
-    /// answers as testing every bound does.
+    /// answers as testing every bound does, and so does asking only
+    /// whether it meets the set.
     #[test]
     fn bounds_passed_down_answer_as_every_bound_and_meeting_as_classifying() {
         let mut rng = Rng::new(5);

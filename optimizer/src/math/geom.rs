@@ -428,14 +428,8 @@ impl Cone {
     /// the distance's only by rounding. For half-angles in (0°, 90°).
     #[inline]
     pub fn sphere_side(&self, c: DVec3, r: f64, or_equal: bool) -> (bool, bool) {
-        let v = c - self.apex;
-        let par = v.dot(self.axis);
-        let w = v - self.axis * par;
-        let perp2 = w.dot(w);
-        // Within: the distance is at most −r ≤ 0 only where it is
-        // perp·cos − par·sin (a positive one is positive), so perp·cos ≤ q.
-        let q = par * self.sin - r;
-        if q >= 0.0 && perp2 * self.cos2 <= q * q {
+        let (par, perp2) = self.axial(c);
+        if self.within_at(par, perp2, r) {
             return (true, false);
         }
         let above = |a: f64, b: f64| if or_equal { a >= b } else { a > b };
@@ -454,11 +448,28 @@ impl Cone {
     /// `or_equal`: the sphere lies inside the cone (distance at most −r).
     #[inline]
     pub fn sphere_within(&self, c: DVec3, r: f64) -> bool {
+        let (par, perp2) = self.axial(c);
+        self.within_at(par, perp2, r)
+    }
+
+    /// The distance of `c` along the axis from the apex, and the square of
+    /// its distance from the axis.
+    #[inline]
+    fn axial(&self, c: DVec3) -> (f64, f64) {
         let v = c - self.apex;
         let par = v.dot(self.axis);
         let w = v - self.axis * par;
+        (par, w.dot(w))
+    }
+
+    /// True when a sphere of radius `r` at `par` along the axis and
+    /// `perp2` squared from it lies inside the cone: the distance is at
+    /// most −r ≤ 0 only where it is perp·cos − par·sin (a positive one is
+    /// positive), so perp·cos ≤ q = par·sin − r.
+    #[inline]
+    fn within_at(&self, par: f64, perp2: f64, r: f64) -> bool {
         let q = par * self.sin - r;
-        q >= 0.0 && w.dot(w) * self.cos2 <= q * q
+        q >= 0.0 && perp2 * self.cos2 <= q * q
     }
 
     /// True when the sphere `(c, r)` may meet the cone: it meets the cone
