@@ -1,6 +1,7 @@
 //! The approximation itself: the kd tree over the grid, the direction
 //! quadtrees per region, and the recursion that keeps problem views.
 
+use glam::DVec3;
 use rayon::prelude::*;
 
 use crate::api::job::Job;
@@ -285,11 +286,13 @@ fn unproven_directions(
 
 /// What the search for a cell's unproven parts keeps from one problem view
 /// to the next: the smallest box holding every unproven part so far; and,
-/// for the VDI at hand, the finest directions refinement leaves unproven
-/// from the whole cell.
+/// for the VDI at hand, the cell and the finest directions refinement
+/// leaves unproven from it, each with its frontier once a part has tested
+/// it.
 struct Parts {
     union: Option<Aabb>,
-    directions: Vec<Vdi>,
+    cell: Aabb,
+    directions: Vec<(Vdi, Option<Frontier>)>,
     hint: Hint,
 }
 
@@ -297,6 +300,7 @@ impl Parts {
     fn new() -> Parts {
         Parts {
             union: None,
+            cell: Aabb::new(DVec3::ZERO, DVec3::ZERO),
             directions: Vec::new(),
             hint: [0; 32],
         }
@@ -317,14 +321,28 @@ impl Parts {
     /// exceeds it. (Testing the coarser directions above them first, as
     /// refinement does, took more cones: from the cell they exceed.)
     ///
+    /// Each direction's walks start from its own frontier, narrowed from
+    /// the problem view's to the direction's set from the whole cell when
+    /// a part first tests it: every view from a part along the direction
+    /// is a view of that set, and the cell's halves and quarters test the
+    /// same direction again and again (on a fly-over's quarter, about three
+    /// fifths fewer sphere tests in these walks, building the frontiers
+    /// included).
+    ///
     /// A direction that exceeds the target from one part often does from
     /// the next: it moves to the front of the list, so an unproven part is
     /// found unproven after fewer walks (the answer does not depend on the
     /// order).
     fn proven(&mut self, p: &Proofs, part: &Aabb, cones: &mut u64) -> bool {
-        let exceeding = self.directions.iter().position(|d| {
+        let cell = self.cell;
+        let exceeding = self.directions.iter_mut().position(|(d, frontier)| {
             *cones += 1;
-            p.exceed(part, d)
+            let frontier = frontier.get_or_insert_with(|| {
+                let set = enclosing_cone(&cell, d, &p.ctx.lens);
+                p.frontier.narrowed(p.ctx, p.costs, &set)
+            });
+            let cone = enclosing_cone(part, d, &p.ctx.lens);
+            frontier.exceeds(p.ctx, p.costs, &cone, p.ctx.t_max)
         });
         match exceeding {
             None => true,
@@ -366,11 +384,15 @@ impl Parts {
             // Only whether refinement proves the VDI matters now.
             return !proven_by_refinement(p, region, vdi, levels.refine, cones, &mut self.hint);
         }
-        self.directions.clear();
-        if !unproven_directions(p, region, vdi, levels.refine, cones, &mut self.directions) {
+        let mut unproven = Vec::new();
+        if !unproven_directions(p, region, vdi, levels.refine, cones, &mut unproven) {
             // Refinement proves it from the whole cell.
             return false;
         }
+        self.cell = *region;
+        self.directions.clear();
+        self.directions
+            .extend(unproven.into_iter().map(|d| (d, None)));
         let mut found = false;
         self.walk(p, region, depth, &mut found, cones);
         found

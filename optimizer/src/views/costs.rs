@@ -285,9 +285,21 @@ fn smaller(fit: Option<Sphere>, own: Sphere) -> Sphere {
 /// Cost of the objects of leaf `n` whose spheres meet `cone`, testing the
 /// bounds of `mask` (those the leaf's sphere was not inside).
 fn leaf_cost(ctx: &Context, costs: &RegionCosts, cone: &Enclosing, n: u32, mask: Bounds) -> Cost {
+    objects_cost(ctx, costs, cone, ctx.hierarchy.objects(n), mask)
+}
+
+/// Cost of the `objects` whose spheres meet `cone`, testing the bounds of
+/// `mask`.
+fn objects_cost(
+    ctx: &Context,
+    costs: &RegionCosts,
+    cone: &Enclosing,
+    objects: &[u32],
+    mask: Bounds,
+) -> Cost {
     let h = ctx.hierarchy;
     let mut c = Cost::default();
-    for &o in h.objects(n) {
+    for &o in objects {
         if costs.objects[o as usize] == Cost::default() {
             continue;
         }
@@ -521,15 +533,19 @@ pub fn exceeds_target(ctx: &Context, costs: &RegionCosts, cone: &Enclosing) -> b
 pub fn exceeds(ctx: &Context, costs: &RegionCosts, cone: &Enclosing, t: f64) -> bool {
     // A node with a child that costs nothing is skipped for its other
     // child ([`RegionCosts::down`]): the same cost in a smaller sphere.
-    exceeds_from(ctx, costs, &[costs.down[0]], cone, t)
+    exceeds_from(ctx, costs, &[(costs.down[0], NO_CUT)], &[], &[], cone, t)
 }
 
-/// [`exceeds`] walking from the clusters `start` (disjoint subtrees)
-/// instead of the root: the objects outside them count nothing.
+/// [`exceeds`] walking from the entries `start` (disjoint subtrees, each
+/// with its index in `cuts`, of `objects`, where it is a cut leaf, else
+/// [`NO_CUT`]) instead of the root: the objects outside them, and those of
+/// a cut leaf not listed in its cut, count nothing.
 fn exceeds_from(
     ctx: &Context,
     costs: &RegionCosts,
-    start: &[u32],
+    start: &[(u32, u32)],
+    cuts: &[Cut],
+    objects: &[u32],
     cone: &Enclosing,
     t: f64,
 ) -> bool {
@@ -537,32 +553,41 @@ fn exceeds_from(
     let model = &ctx.model;
     let mut sum = Cost::default();
     let margin = 1e-9 * model.frame_time(costs.nodes[0]).abs().max(1.0);
-    // The whole costs of the clusters in the queue.
+    // The whole costs of the clusters in the queue (of a cut leaf, its
+    // objects the outer set meets).
     let mut pending = Cost::default();
     let all = cone.all_bounds();
-    let mut queue: VecDeque<(u32, Bounds)> = start
+    let whole = |n: u32, cut: u32| match cuts.get(cut as usize) {
+        Some(c) => c.cost,
+        None => costs.nodes[n as usize],
+    };
+    let mut queue: VecDeque<(u32, u32, Bounds)> = start
         .iter()
-        .map(|&n| {
-            pending += costs.nodes[n as usize];
-            (n, all)
+        .map(|&(n, cut)| {
+            pending += whole(n, cut);
+            (n, cut, all)
         })
         .collect();
-    while let Some((n, mask)) = queue.pop_front() {
-        let whole = costs.nodes[n as usize];
-        pending = pending - whole;
-        if whole == Cost::default() {
+    while let Some((n, cut, mask)) = queue.pop_front() {
+        let w = whole(n, cut);
+        pending = pending - w;
+        if w == Cost::default() {
             continue;
         }
         let node = &h.nodes[n as usize];
         let s = costs.sphere(h, n);
         match cone.classify_within(s.center, s.radius, mask) {
             (Overlap::Outside, _) => {}
-            (Overlap::Inside, _) => sum += whole,
-            (Overlap::Partial, left) => match node.children {
-                None => sum += leaf_cost(ctx, costs, cone, n, left),
-                Some([l, r]) => {
-                    queue.push_back((costs.down[l as usize], left));
-                    queue.push_back((costs.down[r as usize], left));
+            (Overlap::Inside, _) => sum += w,
+            (Overlap::Partial, left) => match (cuts.get(cut as usize), node.children) {
+                (Some(c), _) => {
+                    let objs = &objects[c.start as usize..c.end as usize];
+                    sum += objects_cost(ctx, costs, cone, objs, left);
+                }
+                (None, None) => sum += leaf_cost(ctx, costs, cone, n, left),
+                (None, Some([l, r])) => {
+                    queue.push_back((costs.down[l as usize], NO_CUT, left));
+                    queue.push_back((costs.down[r as usize], NO_CUT, left));
                     pending += costs.nodes[l as usize] + costs.nodes[r as usize];
                     continue;
                 }
@@ -581,48 +606,128 @@ fn exceeds_from(
 /// Where only views inside an outer enclosing set matter (the proofs of a
 /// problem view's parts and sub-directions, every view of which is a view
 /// of the problem view), the clusters a walk starts from: those the outer
-/// set holds whole, and the leaves it cuts. A cluster outside the outer set
-/// is seen by none of those views, so a walk from here counts what a walk
-/// from the root counts, less what the outer set excludes, without testing
-/// again every cluster above the outer set's boundary.
+/// set holds whole, and the leaves it cuts, with only their objects that
+/// meet it. A cluster or object outside the outer set is seen by none of
+/// those views, so a walk from here counts what a walk from the root
+/// counts, less what the outer set excludes, without testing again every
+/// cluster above the outer set's boundary. A frontier narrows to a set
+/// inside its own ([`Frontier::narrowed`]): the proofs of one direction
+/// from many parts of a cell start from the frontier of that direction
+/// from the whole cell.
 pub struct Frontier {
-    /// Disjoint subtrees, in breadth-first order.
-    nodes: Vec<u32>,
+    /// Disjoint subtrees, in breadth-first order, each with the index of
+    /// its entry in `cuts` where it is a leaf the set cuts, else
+    /// [`NO_CUT`].
+    nodes: Vec<(u32, u32)>,
+    /// The leaves the set cuts: the objects of each that meet it.
+    cuts: Vec<Cut>,
+    /// The objects of the cut leaves, each leaf's contiguous.
+    objects: Vec<u32>,
 }
+
+/// A leaf an enclosing set cuts: the range of its objects that meet the set
+/// in [`Frontier::objects`] and their summed cost.
+#[derive(Clone, Copy)]
+pub struct Cut {
+    cost: Cost,
+    start: u32,
+    end: u32,
+}
+
+/// No entry in [`Frontier::cuts`].
+const NO_CUT: u32 = u32::MAX;
 
 impl Frontier {
     /// The clusters `outer` does not exclude, found breadth first as
     /// [`exceeds`] walks (zero-cost clusters skipped, [`RegionCosts::down`]
-    /// followed).
+    /// followed); of a leaf it cuts, only the objects that meet it.
     pub fn within(ctx: &Context, costs: &RegionCosts, outer: &Enclosing) -> Frontier {
+        Self::within_from(ctx, costs, &[(costs.down[0], NO_CUT)], &[], &[], outer)
+    }
+
+    /// The frontier of `outer` below the entries `start` (disjoint
+    /// subtrees, cut leaves in `cuts` of `objects`).
+    fn within_from(
+        ctx: &Context,
+        costs: &RegionCosts,
+        start: &[(u32, u32)],
+        cuts: &[Cut],
+        objects: &[u32],
+        outer: &Enclosing,
+    ) -> Frontier {
         let h = ctx.hierarchy;
-        let mut nodes = Vec::new();
-        let mut queue = VecDeque::from([(costs.down[0], outer.all_bounds())]);
-        while let Some((n, mask)) = queue.pop_front() {
-            if costs.nodes[n as usize] == Cost::default() {
+        let all = outer.all_bounds();
+        let mut out = Frontier {
+            nodes: Vec::new(),
+            cuts: Vec::new(),
+            objects: Vec::new(),
+        };
+        // Cuts `n` to the objects of `objs` that meet `outer`.
+        let cut = |out: &mut Frontier, n: u32, objs: &[u32], mask: Bounds| {
+            let start = out.objects.len() as u32;
+            let mut cost = Cost::default();
+            for &o in objs {
+                let c = costs.objects[o as usize];
+                let s = &h.object_spheres[o as usize];
+                if c != Cost::default() && outer.meets_within(s.center, s.radius, mask) {
+                    out.objects.push(o);
+                    cost += c;
+                }
+            }
+            let end = out.objects.len() as u32;
+            if end > start {
+                out.nodes.push((n, out.cuts.len() as u32));
+                out.cuts.push(Cut { cost, start, end });
+            }
+        };
+        let mut queue: VecDeque<(u32, u32, Bounds)> =
+            start.iter().map(|&(n, c)| (n, c, all)).collect();
+        while let Some((n, c, mask)) = queue.pop_front() {
+            let given = cuts.get(c as usize);
+            if given.map_or(costs.nodes[n as usize], |g| g.cost) == Cost::default() {
                 continue;
             }
             let s = costs.sphere(h, n);
             match outer.classify_within(s.center, s.radius, mask) {
                 (Overlap::Outside, _) => {}
-                (Overlap::Inside, _) => nodes.push(n),
-                (Overlap::Partial, left) => match h.nodes[n as usize].children {
-                    None => nodes.push(n),
-                    Some([l, r]) => {
-                        queue.push_back((costs.down[l as usize], left));
-                        queue.push_back((costs.down[r as usize], left));
+                (Overlap::Inside, _) => match given {
+                    Some(g) => cut(
+                        &mut out,
+                        n,
+                        &objects[g.start as usize..g.end as usize],
+                        Bounds::default(),
+                    ),
+                    None => out.nodes.push((n, NO_CUT)),
+                },
+                (Overlap::Partial, left) => match (given, h.nodes[n as usize].children) {
+                    (Some(g), _) => cut(
+                        &mut out,
+                        n,
+                        &objects[g.start as usize..g.end as usize],
+                        left,
+                    ),
+                    (None, None) => cut(&mut out, n, h.objects(n), left),
+                    (None, Some([l, r])) => {
+                        queue.push_back((costs.down[l as usize], NO_CUT, left));
+                        queue.push_back((costs.down[r as usize], NO_CUT, left));
                     }
                 },
             }
         }
-        Frontier { nodes }
+        out
+    }
+
+    /// The frontier of `inner` (every view of which is a view of this
+    /// frontier's set) below this one.
+    pub fn narrowed(&self, ctx: &Context, costs: &RegionCosts, inner: &Enclosing) -> Frontier {
+        Self::within_from(ctx, costs, &self.nodes, &self.cuts, &self.objects, inner)
     }
 
     /// [`exceeds`] counting only the objects below the frontier: for a set
     /// whose views are all views of the outer set, an upper bound of every
     /// such view's cost as [`exceeds`]'s is.
     pub fn exceeds(&self, ctx: &Context, costs: &RegionCosts, cone: &Enclosing, t: f64) -> bool {
-        exceeds_from(ctx, costs, &self.nodes, cone, t)
+        exceeds_from(ctx, costs, &self.nodes, &self.cuts, &self.objects, cone, t)
     }
 
     /// True when object `o` is below the frontier.
@@ -631,7 +736,10 @@ impl Frontier {
         let leaf = h.leaf_of[o as usize];
         self.nodes
             .iter()
-            .any(|&a| a <= leaf && leaf < h.nodes[a as usize].subtree_end)
+            .any(|&(a, c)| match self.cuts.get(c as usize) {
+                Some(g) => self.objects[g.start as usize..g.end as usize].contains(&o),
+                None => a <= leaf && leaf < h.nodes[a as usize].subtree_end,
+            })
     }
 }
 
@@ -741,70 +849,101 @@ mod tests {
         }
     }
 
-    /// A frontier within a cell's enclosing set for a VDI holds every
-    /// object an exact view from the cell with a direction in the VDI sees
-    /// (its sphere meets the view's frustum) and leaves others out, so the
-    /// check could fail; and a walk from it never finds a part of the cell
-    /// in a sub-direction above a threshold where the walk from the root
-    /// finds it within (it counts a subset), for thresholds on both sides
-    /// of each set's time, both answers occurring.
+    /// A frontier within a cell's enclosing set for a VDI, and one narrowed
+    /// from it to each sub-direction, holds every object an exact view from
+    /// the cell with a direction in its set sees (its sphere meets the
+    /// view's frustum) and leaves others out, so the check could fail: of
+    /// the leaves it cuts too (it keeps their objects that meet the set),
+    /// and a narrowed frontier holds less than its parent. A walk from
+    /// either never finds a part of the cell in a direction of its set
+    /// above a threshold where the walk from the root finds it within (it
+    /// counts a subset), for thresholds on both sides of each set's time,
+    /// both answers occurring.
     #[test]
     fn a_frontier_holds_what_its_views_see() {
         use crate::math::geom::ViewFrustum;
         use glam::DVec3;
         let mut rng = crate::math::rng::Rng::new(7);
-        let (mut seen, mut left_out, mut above, mut below) = (0usize, 0usize, 0usize, 0usize);
+        let (mut seen, mut left_out, mut cut_away) = (0usize, 0usize, 0usize);
+        let (mut held_outer, mut held_narrowed) = (0usize, 0usize);
+        let (mut above, mut below) = (0usize, 0usize);
         with_test_cells(|ctx, region, costs, vdi| {
             if !ctx.pitch_overlaps(vdi) {
                 return;
             }
             let h = ctx.hierarchy;
+            let n = ctx.scene.objects.len() as u32;
             let outer = enclosing_cone(region, vdi, &ctx.lens);
             let f = Frontier::within(ctx, costs, &outer);
-            let n = ctx.scene.objects.len() as u32;
-            left_out += (0..n).filter(|&o| !f.holds(h, o)).count();
-            let corners = vdi.corner_dirs();
-            for _ in 0..6 {
-                let u = DVec3::new(rng.f64(), rng.f64(), rng.f64());
-                let eye = region.min + (region.max - region.min) * u;
-                // A positive combination of the corners' directions lies
-                // in the VDI.
-                let dir = corners
-                    .iter()
-                    .fold(DVec3::ZERO, |a, &c| a + c * (0.05 + rng.f64()))
-                    .normalize();
-                if !ctx.in_pitch(dir) {
-                    continue;
-                }
-                let view = ViewFrustum::new(eye, dir, ctx.lens.fov_deg, ctx.lens.aspect);
-                for o in 0..n {
-                    let s = &h.object_spheres[o as usize];
-                    if view.distance(s.center) <= s.radius {
-                        seen += 1;
-                        assert!(f.holds(h, o), "object {o} seen from {eye:?} along {dir:?}");
-                    }
+            let mut sets = vec![(*vdi, f)];
+            for d in vdi.children() {
+                if ctx.pitch_overlaps(&d) {
+                    let g = sets[0]
+                        .1
+                        .narrowed(ctx, costs, &enclosing_cone(region, &d, &ctx.lens));
+                    sets.push((d, g));
                 }
             }
-            let mut lower = *region;
-            lower.max.x = region.center().x;
-            for part in [*region, lower] {
-                for d in vdi.children() {
-                    let cone = enclosing_cone(&part, &d, &ctx.lens);
-                    let t = ctx
-                        .model
-                        .frame_time(enclosed_cost(ctx, costs, &cone, &part, None));
-                    for k in [0.9, 1.0 - 1e-6, 1.0 + 1e-6, 1.1] {
-                        let from_frontier = f.exceeds(ctx, costs, &cone, t * k);
-                        assert!(!from_frontier || exceeds(ctx, costs, &cone, t * k));
-                        above += usize::from(from_frontier);
-                        below += usize::from(!from_frontier);
+            for (k, (set, f)) in sets.iter().enumerate() {
+                let held = (0..n).filter(|&o| f.holds(h, o)).count();
+                if k == 0 {
+                    held_outer += held * (sets.len() - 1);
+                } else {
+                    held_narrowed += held;
+                }
+                left_out += n as usize - held;
+                for &(leaf, c) in &f.nodes {
+                    if let Some(g) = f.cuts.get(c as usize) {
+                        cut_away += h.objects(leaf).len() - (g.end - g.start) as usize;
+                    }
+                }
+                let corners = set.corner_dirs();
+                for _ in 0..4 {
+                    let u = DVec3::new(rng.f64(), rng.f64(), rng.f64());
+                    let eye = region.min + (region.max - region.min) * u;
+                    // A positive combination of the corners' directions
+                    // lies in the set's VDI.
+                    let dir = corners
+                        .iter()
+                        .fold(DVec3::ZERO, |a, &c| a + c * (0.05 + rng.f64()))
+                        .normalize();
+                    if !ctx.in_pitch(dir) {
+                        continue;
+                    }
+                    let view = ViewFrustum::new(eye, dir, ctx.lens.fov_deg, ctx.lens.aspect);
+                    for o in 0..n {
+                        let s = &h.object_spheres[o as usize];
+                        if view.distance(s.center) <= s.radius {
+                            seen += 1;
+                            assert!(f.holds(h, o), "object {o} seen from {eye:?} along {dir:?}");
+                        }
+                    }
+                }
+                let mut lower = *region;
+                lower.max.x = region.center().x;
+                for part in [*region, lower] {
+                    for d in set.children() {
+                        let cone = enclosing_cone(&part, &d, &ctx.lens);
+                        let t = ctx
+                            .model
+                            .frame_time(enclosed_cost(ctx, costs, &cone, &part, None));
+                        for k in [0.9, 1.0 - 1e-6, 1.0 + 1e-6, 1.1] {
+                            let from_frontier = f.exceeds(ctx, costs, &cone, t * k);
+                            assert!(!from_frontier || exceeds(ctx, costs, &cone, t * k));
+                            above += usize::from(from_frontier);
+                            below += usize::from(!from_frontier);
+                        }
                     }
                 }
             }
         });
         assert!(
-            seen > 1000 && left_out > 1000,
-            "{seen} seen, {left_out} left out"
+            seen > 1000 && left_out > 1000 && cut_away > 100,
+            "{seen} seen, {left_out} left out, {cut_away} cut away"
+        );
+        assert!(
+            held_narrowed < held_outer,
+            "narrowed frontiers hold {held_narrowed}, their parents {held_outer}"
         );
         assert!(above > 0 && below > 0, "{above} above, {below} below");
     }
