@@ -1,7 +1,6 @@
 //! The approximation itself: the kd tree over the grid, the direction
 //! quadtrees per region, and the recursion that keeps problem views.
 
-use glam::DVec3;
 use rayon::prelude::*;
 
 use crate::api::job::Job;
@@ -286,12 +285,10 @@ fn unproven_directions(
 
 /// What the search for a cell's unproven parts keeps from one problem view
 /// to the next: the smallest box holding every unproven part so far; and,
-/// for the VDI at hand, the cell and the finest directions refinement
-/// leaves unproven from it, each with its frontier once a part has tested
-/// it.
+/// for the VDI at hand, the finest directions refinement leaves unproven
+/// from the whole cell, each with its frontier once a part has tested it.
 struct Parts {
     union: Option<Aabb>,
-    cell: Aabb,
     directions: Vec<(Vdi, Option<Frontier>)>,
     hint: Hint,
 }
@@ -300,7 +297,6 @@ impl Parts {
     fn new() -> Parts {
         Parts {
             union: None,
-            cell: Aabb::new(DVec3::ZERO, DVec3::ZERO),
             directions: Vec::new(),
             hint: [0; 32],
         }
@@ -333,12 +329,11 @@ impl Parts {
     /// the next: it moves to the front of the list, so an unproven part is
     /// found unproven after fewer walks (the answer does not depend on the
     /// order).
-    fn proven(&mut self, p: &Proofs, part: &Aabb, cones: &mut u64) -> bool {
-        let cell = self.cell;
+    fn proven(&mut self, p: &Proofs, cell: &Aabb, part: &Aabb, cones: &mut u64) -> bool {
         let exceeding = self.directions.iter_mut().position(|(d, frontier)| {
             *cones += 1;
             let frontier = frontier.get_or_insert_with(|| {
-                let set = enclosing_cone(&cell, d, &p.ctx.lens);
+                let set = enclosing_cone(cell, d, &p.ctx.lens);
                 p.frontier.narrowed(p.ctx, p.costs, &set)
             });
             let cone = enclosing_cone(part, d, &p.ctx.lens);
@@ -389,25 +384,34 @@ impl Parts {
             // Refinement proves it from the whole cell.
             return false;
         }
-        self.cell = *region;
         self.directions.clear();
         self.directions
             .extend(unproven.into_iter().map(|d| (d, None)));
         let mut found = false;
-        self.walk(p, region, depth, &mut found, cones);
+        self.walk(p, region, region, depth, &mut found, cones);
         found
     }
 
-    fn walk(&mut self, p: &Proofs, region: &Aabb, depth: u8, found: &mut bool, cones: &mut u64) {
+    /// Searches the halves of `region`, a part of `cell`, `depth` levels
+    /// down.
+    fn walk(
+        &mut self,
+        p: &Proofs,
+        cell: &Aabb,
+        region: &Aabb,
+        depth: u8,
+        found: &mut bool,
+        cones: &mut u64,
+    ) {
         for part in halves(region) {
             if *found && self.covers(&part) {
                 continue;
             }
-            if self.proven(p, &part, cones) {
+            if self.proven(p, cell, &part, cones) {
                 continue;
             }
             if depth > 1 {
-                self.walk(p, &part, depth - 1, found, cones);
+                self.walk(p, cell, &part, depth - 1, found, cones);
             } else {
                 *found = true;
                 self.record(part);

@@ -297,18 +297,24 @@ fn objects_cost(
     objects: &[u32],
     mask: Bounds,
 ) -> Cost {
+    meeting(ctx, costs, cone, objects, mask).fold(Cost::default(), |sum, (_, c)| sum + c)
+}
+
+/// The `objects` that cost something and whose spheres meet `cone`
+/// (testing the bounds of `mask`), each with its cost, in their order.
+fn meeting<'a>(
+    ctx: &'a Context,
+    costs: &'a RegionCosts,
+    cone: &'a Enclosing,
+    objects: &'a [u32],
+    mask: Bounds,
+) -> impl Iterator<Item = (u32, Cost)> + 'a {
     let h = ctx.hierarchy;
-    let mut c = Cost::default();
-    for &o in objects {
-        if costs.objects[o as usize] == Cost::default() {
-            continue;
-        }
+    objects.iter().filter_map(move |&o| {
+        let c = costs.objects[o as usize];
         let s = &h.object_spheres[o as usize];
-        if cone.meets_within(s.center, s.radius, mask) {
-            c += costs.objects[o as usize];
-        }
-    }
-    c
+        (c != Cost::default() && cone.meets_within(s.center, s.radius, mask)).then_some((o, c))
+    })
 }
 
 /// Which clusters a CPV of one region may list where its enclosing set
@@ -557,10 +563,7 @@ fn exceeds_from(
     // objects the outer set meets).
     let mut pending = Cost::default();
     let all = cone.all_bounds();
-    let whole = |n: u32, cut: u32| match cuts.get(cut as usize) {
-        Some(c) => c.cost,
-        None => costs.nodes[n as usize],
-    };
+    let whole = |n: u32, cut: u32| entry_cost(costs, cuts, n, cut);
     let mut queue: VecDeque<(u32, u32, Bounds)> = start
         .iter()
         .map(|&(n, cut)| {
@@ -637,6 +640,13 @@ pub struct Cut {
 /// No entry in [`Frontier::cuts`].
 const NO_CUT: u32 = u32::MAX;
 
+/// What a frontier entry (`n`, `cut`) may add: the whole cost of cluster
+/// `n`, or of a cut leaf the cost of its objects in the cut.
+fn entry_cost(costs: &RegionCosts, cuts: &[Cut], n: u32, cut: u32) -> Cost {
+    cuts.get(cut as usize)
+        .map_or(costs.nodes[n as usize], |c| c.cost)
+}
+
 impl Frontier {
     /// The clusters `outer` does not exclude, found breadth first as
     /// [`exceeds`] walks (zero-cost clusters skipped, [`RegionCosts::down`]
@@ -662,17 +672,13 @@ impl Frontier {
             cuts: Vec::new(),
             objects: Vec::new(),
         };
-        // Cuts `n` to the objects of `objs` that meet `outer`.
+        // Leaf `n` with only those of `objs` that meet `outer`.
         let cut = |out: &mut Frontier, n: u32, objs: &[u32], mask: Bounds| {
             let start = out.objects.len() as u32;
             let mut cost = Cost::default();
-            for &o in objs {
-                let c = costs.objects[o as usize];
-                let s = &h.object_spheres[o as usize];
-                if c != Cost::default() && outer.meets_within(s.center, s.radius, mask) {
-                    out.objects.push(o);
-                    cost += c;
-                }
+            for (o, c) in meeting(ctx, costs, outer, objs, mask) {
+                out.objects.push(o);
+                cost += c;
             }
             let end = out.objects.len() as u32;
             if end > start {
@@ -683,20 +689,23 @@ impl Frontier {
         let mut queue: VecDeque<(u32, u32, Bounds)> =
             start.iter().map(|&(n, c)| (n, c, all)).collect();
         while let Some((n, c, mask)) = queue.pop_front() {
-            let given = cuts.get(c as usize);
-            if given.map_or(costs.nodes[n as usize], |g| g.cost) == Cost::default() {
+            if entry_cost(costs, cuts, n, c) == Cost::default() {
                 continue;
             }
+            let given = cuts.get(c as usize);
             let s = costs.sphere(h, n);
             match outer.classify_within(s.center, s.radius, mask) {
                 (Overlap::Outside, _) => {}
                 (Overlap::Inside, _) => match given {
-                    Some(g) => cut(
-                        &mut out,
-                        n,
-                        &objects[g.start as usize..g.end as usize],
-                        Bounds::default(),
-                    ),
+                    // The same objects, the same sum.
+                    Some(g) => {
+                        let start = out.objects.len() as u32;
+                        out.objects
+                            .extend_from_slice(&objects[g.start as usize..g.end as usize]);
+                        let end = out.objects.len() as u32;
+                        out.nodes.push((n, out.cuts.len() as u32));
+                        out.cuts.push(Cut { start, end, ..*g });
+                    }
                     None => out.nodes.push((n, NO_CUT)),
                 },
                 (Overlap::Partial, left) => match (given, h.nodes[n as usize].children) {
