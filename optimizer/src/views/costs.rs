@@ -694,33 +694,25 @@ impl Frontier {
             }
             let given = cuts.get(c as usize);
             let s = costs.sphere(h, n);
-            match outer.classify_within(s.center, s.radius, mask) {
-                (Overlap::Outside, _) => {}
-                (Overlap::Inside, _) => match given {
-                    // The same objects, the same sum.
-                    Some(g) => {
-                        let start = out.objects.len() as u32;
-                        out.objects
-                            .extend_from_slice(&objects[g.start as usize..g.end as usize]);
-                        let end = out.objects.len() as u32;
-                        out.nodes.push((n, out.cuts.len() as u32));
-                        out.cuts.push(Cut { start, end, ..*g });
-                    }
-                    None => out.nodes.push((n, NO_CUT)),
-                },
-                (Overlap::Partial, left) => match (given, h.nodes[n as usize].children) {
-                    (Some(g), _) => cut(
-                        &mut out,
-                        n,
-                        &objects[g.start as usize..g.end as usize],
-                        left,
-                    ),
-                    (None, None) => cut(&mut out, n, h.objects(n), left),
-                    (None, Some([l, r])) => {
-                        queue.push_back((costs.down[l as usize], NO_CUT, left));
-                        queue.push_back((costs.down[r as usize], NO_CUT, left));
-                    }
-                },
+            // A sphere inside the set has no bound left to test.
+            let (inside, left) = match outer.classify_within(s.center, s.radius, mask) {
+                (Overlap::Outside, _) => continue,
+                (Overlap::Inside, _) => (true, 0),
+                (Overlap::Partial, left) => (false, left),
+            };
+            match (given, h.nodes[n as usize].children) {
+                (Some(g), _) => cut(
+                    &mut out,
+                    n,
+                    &objects[g.start as usize..g.end as usize],
+                    left,
+                ),
+                (None, _) if inside => out.nodes.push((n, NO_CUT)),
+                (None, None) => cut(&mut out, n, h.objects(n), left),
+                (None, Some([l, r])) => {
+                    queue.push_back((costs.down[l as usize], NO_CUT, left));
+                    queue.push_back((costs.down[r as usize], NO_CUT, left));
+                }
             }
         }
         out
@@ -859,9 +851,11 @@ mod tests {
     }
 
     /// A frontier within a cell's enclosing set for a VDI, and one narrowed
-    /// from it to each sub-direction, holds every object an exact view from
-    /// the cell with a direction in its set sees (its sphere meets the
-    /// view's frustum) and leaves others out, so the check could fail: of
+    /// from it to each sub-direction, holds every object that costs
+    /// something and meets its set (below its parent), hence every object
+    /// an exact view from the cell with a direction in its set sees (its
+    /// sphere meets the view's frustum), and leaves others out, so the
+    /// check could fail: of
     /// the leaves it cuts too (it keeps their objects that meet the set),
     /// and a narrowed frontier holds less than its parent. A walk from
     /// either never finds a part of the cell in a direction of its set
@@ -884,12 +878,35 @@ mod tests {
             let n = ctx.scene.objects.len() as u32;
             let outer = enclosing_cone(region, vdi, &ctx.lens);
             let f = Frontier::within(ctx, costs, &outer);
+            // Every object that costs something and whose sphere meets the
+            // set is held (below the parent frontier, for a narrowed one).
+            let complete = |f: &Frontier, set: &Enclosing, parent: Option<&Frontier>| {
+                let all = set.all_bounds();
+                for o in 0..n {
+                    let s = &h.object_spheres[o as usize];
+                    if costs.objects[o as usize] != Cost::default()
+                        && set.meets_within(s.center, s.radius, all)
+                        && parent.is_none_or(|p| p.holds(h, o))
+                    {
+                        assert!(f.holds(h, o), "object {o} meets the set, not held");
+                    }
+                }
+            };
+            complete(&f, &outer, None);
             let mut sets = vec![(*vdi, f)];
             for d in vdi.children() {
                 if ctx.pitch_overlaps(&d) {
-                    let g = sets[0]
-                        .1
-                        .narrowed(ctx, costs, &enclosing_cone(region, &d, &ctx.lens));
+                    let inner = enclosing_cone(region, &d, &ctx.lens);
+                    let g = sets[0].1.narrowed(ctx, costs, &inner);
+                    complete(&g, &inner, Some(&sets[0].1));
+                    // Narrowed again, to a corner of the cell and finer
+                    // directions, as a part's proofs narrow.
+                    let corner =
+                        Aabb::new(region.min, region.min + (region.max - region.min) * 0.25);
+                    for e in d.children() {
+                        let innermost = enclosing_cone(&corner, &e, &ctx.lens);
+                        complete(&g.narrowed(ctx, costs, &innermost), &innermost, Some(&g));
+                    }
                     sets.push((d, g));
                 }
             }
