@@ -590,10 +590,32 @@ fn process(
             };
             // Without refinement nothing is proven here.
             if levels.refine > 0 && levels.split > 0 {
-                problems.retain(|vdi| {
-                    let p = Proofs::new(ctx, &costs, &region, vdi);
-                    let l = deeper(&p, &mut cones);
-                    parts.add(&p, &region, vdi, l, &mut cones)
+                // The problem views far above the target first: their
+                // problems are real and soon fill the cell, after which a
+                // near-target one is only refined from the cell (no listing
+                // of its finest directions, no part walks). Each keeps or
+                // drops its VDI by a proof either way; the CPVs stay in VDI
+                // order.
+                let proofs: Vec<(Proofs, Levels)> = problems
+                    .iter()
+                    .map(|vdi| {
+                        let p = Proofs::new(ctx, &costs, &region, vdi);
+                        let l = deeper(&p, &mut cones);
+                        (p, l)
+                    })
+                    .collect();
+                let mut order: Vec<usize> = (0..problems.len()).collect();
+                order.sort_by_key(|&k| proofs[k].1.refine);
+                let mut keep = vec![false; problems.len()];
+                for k in order {
+                    let (p, l) = &proofs[k];
+                    keep[k] = parts.add(p, &region, &problems[k], *l, &mut cones);
+                }
+                drop(proofs);
+                let mut k = 0;
+                problems.retain(|_| {
+                    k += 1;
+                    keep[k - 1]
                 });
             } else if levels.refine > 0 {
                 let mut hint = [0; 32];
