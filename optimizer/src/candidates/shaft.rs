@@ -402,11 +402,10 @@ mod tests {
                         }
                     }
                     // Even: some axis lies within about half the grid's
-                    // diagonal (step/√2) of any direction the grid spans
+                    // diagonal (step/√2, at most 0.75 step) of any direction
+                    // the grid spans, so at `axis_spacing` 1 within 0.75 α
                     // (rings no denser than the horizontal one, so the grid
-                    // grows with the sphere's area, not with its rings): at
-                    // `axis_spacing` 1, within about α/√2 of the shaft's own
-                    // half-angle.
+                    // grows with the sphere's area, not with its rings).
                     let nearest = axes
                         .iter()
                         .map(|&(m, j)| grid.axis(m, j).dot(w).clamp(-1.0, 1.0).acos())

@@ -339,9 +339,9 @@ pub struct CandidateParams {
     /// sphere). Wide shafts on a fine grid overlap their neighbours almost
     /// wholly; spacing them in proportion to their width keeps the choice of
     /// which cells a shaft serves while listing each cell under fewer
-    /// shafts. At 1, every direction lies within `α/√2` of an axis, so a
-    /// shaft still holds the cells around any direction. 0 puts every
-    /// angle on the `direction_step_deg` grid. Default 1.
+    /// shafts. At 1, every direction lies within about `α/√2` of an axis
+    /// (at most 0.75 α). 0 puts every angle on the `direction_step_deg`
+    /// grid. Default 1.
     #[serde(default = "default_axis_spacing")]
     pub axis_spacing: f64,
     /// Shaft minimum distances range from `size` to `size · 2^doublings`, with
