@@ -142,9 +142,11 @@ struct State<'a> {
     /// Per (CPV, cluster): covered when an impostor of the cluster or an
     /// ancestor is placed there (a subtree is a range of pre-order ids),
     /// adjusted when one of a descendant is, so its representation is its
-    /// objects' cost minus its adjustment (set on the whole ancestor chain
-    /// of every impostor).
+    /// objects' cost minus its adjustment (set on every ancestor of an
+    /// impostor that has candidates: no other representation is read).
     marks: NodeMarks,
+    /// Per cluster: some candidate is an impostor of it.
+    has_candidates: Vec<bool>,
     /// Per kd node (cell): how many of its CPVs are still above `t_max`. A
     /// solved CPV adds nothing to any score, so cells without unsolved CPVs
     /// are skipped when scoring.
@@ -237,6 +239,13 @@ impl<'a> State<'a> {
             all: cands,
             adjustments: vec![Adjustments::default(); ctx.hierarchy.nodes.len()],
             marks: NodeMarks::new(pv.cpvs.len(), ctx.hierarchy.nodes.len()),
+            has_candidates: {
+                let mut v = vec![false; ctx.hierarchy.nodes.len()];
+                for c in &cands.list {
+                    v[c.node as usize] = true;
+                }
+                v
+            },
             unsolved_in_cell: {
                 let mut v = vec![0u32; pv.kd.len()];
                 for (i, c) in pv.cpvs.iter().enumerate() {
@@ -604,7 +613,10 @@ impl<'a> State<'a> {
             })
             .collect();
         // The impostor replaces the cluster's representation: every
-        // ancestor's gets cheaper by the difference.
+        // ancestor's gets cheaper by the difference. Only the ancestors
+        // with candidates are scored or accepted, so only theirs is kept
+        // (a fly-over's top clusters hold the view space and have none:
+        // its chains are a quarter shorter, without their longest rows).
         changes.sort_unstable_by_key(|x| x.0);
         let h = self.ctx.hierarchy;
         let node = self.cands[i as usize].node;
@@ -613,7 +625,9 @@ impl<'a> State<'a> {
         let mut chain = Vec::new();
         let mut up = h.nodes[node as usize].parent;
         while up != u32::MAX {
-            chain.push(up);
+            if self.has_candidates[up as usize] {
+                chain.push(up);
+            }
             up = h.nodes[up as usize].parent;
         }
         chain.reverse();
@@ -852,6 +866,86 @@ mod tests {
     /// combine mode and at every stage of a selection (covered clusters,
     /// descendant impostors, solved cells), and they rank: for each block
     /// the best bound is at least the best score.
+    /// After greedy choices, a cluster's representation in a CPV is what
+    /// the impostors placed there say, recomputed from scratch: nothing
+    /// where an impostor of it or an ancestor is placed, else its objects'
+    /// cost less, for each impostor below it, that impostor's cluster's
+    /// objects' cost less the impostor's (the savings of replaced
+    /// impostors telescope to this).
+    #[test]
+    fn representations_follow_the_impostors_placed() {
+        let scene = synthetic_city(3, 5, 5);
+        let job = synthetic_job(5, 5);
+        let h = Hierarchy::build(&scene);
+        let ctx = Context::new(&scene, &h, None, &job, Control::default());
+        let pv = views::approximate(&ctx, &job, &Counters::new());
+        let cands = crate::candidates::generate(&ctx, &job, &pv);
+        let mut st = State::new(&ctx, &pv, &cands, None);
+        for _ in 0..24 {
+            let best = (0..cands.list.len() as u32)
+                .map(|i| Key {
+                    score: st.score(i),
+                    id: i,
+                })
+                .max()
+                .filter(|k| k.score > 0.0);
+            let Some(best) = best else { break };
+            st.accept(best.id);
+        }
+        // The objects' cost of cluster `n` in CPV `c`, when `c` lists it.
+        let pair_cost = |c: u32, n: u32| {
+            let kd = pv.cpvs[c as usize].kd;
+            cands
+                .pairs
+                .groups_of(n)
+                .indices()
+                .map(|g| cands.pairs.group(g as u32))
+                .filter(|gr| gr.kd == kd)
+                .find_map(|gr| cands.pairs.iter(gr).find(|&(x, _)| x == c).map(|p| p.1))
+        };
+        let mut nodes: Vec<u32> = cands.list.iter().map(|c| c.node).collect();
+        nodes.dedup();
+        let (mut covered, mut adjusted) = (0, 0);
+        for &n in &nodes {
+            for g in cands.pairs.groups_of(n).indices() {
+                let gr = cands.pairs.group(g as u32);
+                for (c, orig) in cands.pairs.iter(gr) {
+                    let placed = &st.sel.cpv_impostors[c as usize];
+                    let node_of = |j: u32| cands.list[j as usize].node;
+                    let rep = st.representation(c, n, orig);
+                    if placed
+                        .iter()
+                        .any(|&j| node_of(j) == n || h.is_descendant(n, node_of(j)))
+                    {
+                        assert!(rep.is_none(), "CPV {c}, cluster {n}: covered");
+                        covered += 1;
+                        continue;
+                    }
+                    let mut want = orig;
+                    let mut below = 0;
+                    for &j in placed.iter().filter(|&&j| h.is_descendant(node_of(j), n)) {
+                        let own = pair_cost(c, node_of(j)).expect("a placed cluster is listed");
+                        let imp =
+                            impostor_cost(&ctx, &cands.list[j as usize], &pv.cpvs[c as usize]);
+                        want = want - own + imp;
+                        below += 1;
+                    }
+                    let rep = rep.expect("not covered");
+                    let close = |a: f64, b: f64| (a - b).abs() <= 1e-9 * (1.0 + a.abs() + b.abs());
+                    assert!(
+                        close(rep.cpu, want.cpu) && close(rep.gpu, want.gpu),
+                        "CPV {c}, cluster {n}, {below} impostors below: {rep:?} against {want:?}"
+                    );
+                    adjusted += usize::from(below > 0);
+                }
+            }
+        }
+        assert!(
+            covered > 100 && adjusted > 100,
+            "covered {covered}, adjusted {adjusted}"
+        );
+    }
+
     #[test]
     fn bounds_hold_every_score() {
         use crate::api::job::Combine;
