@@ -862,10 +862,29 @@ mod tests {
         }
     }
 
-    /// A block's bounds are never below its exact scores, in every
-    /// combine mode and at every stage of a selection (covered clusters,
-    /// descendant impostors, solved cells), and they rank: for each block
-    /// the best bound is at least the best score.
+    /// Calls `f` with the small synthetic city's problem views and
+    /// candidates.
+    fn with_small_city(f: impl FnOnce(&Context, &ProblemViews, &Candidates)) {
+        let scene = synthetic_city(3, 5, 5);
+        let job = synthetic_job(5, 5);
+        let h = Hierarchy::build(&scene);
+        let ctx = Context::new(&scene, &h, None, &job, Control::default());
+        let pv = views::approximate(&ctx, &job, &Counters::new());
+        let cands = crate::candidates::generate(&ctx, &job, &pv);
+        f(&ctx, &pv, &cands);
+    }
+
+    /// The naive greedy's choice: the candidate of the best positive score.
+    fn best_by_score(st: &State) -> Option<Key> {
+        (0..st.cands.len() as u32)
+            .map(|i| Key {
+                score: st.score(i),
+                id: i,
+            })
+            .max()
+            .filter(|k| k.score > 0.0)
+    }
+
     /// After greedy choices, a cluster's representation in a CPV is what
     /// the impostors placed there say, recomputed from scratch: nothing
     /// where an impostor of it or an ancestor is placed, else its objects'
@@ -874,22 +893,16 @@ mod tests {
     /// impostors telescope to this).
     #[test]
     fn representations_follow_the_impostors_placed() {
-        let scene = synthetic_city(3, 5, 5);
-        let job = synthetic_job(5, 5);
-        let h = Hierarchy::build(&scene);
-        let ctx = Context::new(&scene, &h, None, &job, Control::default());
-        let pv = views::approximate(&ctx, &job, &Counters::new());
-        let cands = crate::candidates::generate(&ctx, &job, &pv);
-        let mut st = State::new(&ctx, &pv, &cands, None);
+        with_small_city(representations_check);
+    }
+
+    fn representations_check(ctx: &Context, pv: &ProblemViews, cands: &Candidates) {
+        let h = ctx.hierarchy;
+        let mut st = State::new(ctx, pv, cands, None);
         for _ in 0..24 {
-            let best = (0..cands.list.len() as u32)
-                .map(|i| Key {
-                    score: st.score(i),
-                    id: i,
-                })
-                .max()
-                .filter(|k| k.score > 0.0);
-            let Some(best) = best else { break };
+            let Some(best) = best_by_score(&st) else {
+                break;
+            };
             st.accept(best.id);
         }
         // The objects' cost of cluster `n` in CPV `c`, when `c` lists it.
@@ -925,8 +938,7 @@ mod tests {
                     let mut below = 0;
                     for &j in placed.iter().filter(|&&j| h.is_descendant(node_of(j), n)) {
                         let own = pair_cost(c, node_of(j)).expect("a placed cluster is listed");
-                        let imp =
-                            impostor_cost(&ctx, &cands.list[j as usize], &pv.cpvs[c as usize]);
+                        let imp = impostor_cost(ctx, &cands.list[j as usize], &pv.cpvs[c as usize]);
                         want = want - own + imp;
                         below += 1;
                     }
@@ -946,6 +958,10 @@ mod tests {
         );
     }
 
+    /// A block's bounds are never below its exact scores, in every
+    /// combine mode and at every stage of a selection (covered clusters,
+    /// descendant impostors, solved cells), and they rank: for each block
+    /// the best bound is at least the best score.
     #[test]
     fn bounds_hold_every_score() {
         use crate::api::job::Combine;
@@ -977,14 +993,9 @@ mod tests {
                         tight += usize::from(e > 0.0 && u < 1.5 * e);
                     }
                 }
-                let best = (0..cands.list.len() as u32)
-                    .map(|i| Key {
-                        score: st.score(i),
-                        id: i,
-                    })
-                    .max()
-                    .filter(|k| k.score > 0.0);
-                let Some(best) = best else { break };
+                let Some(best) = best_by_score(&st) else {
+                    break;
+                };
                 st.accept(best.id);
             }
             assert!(checked > 1000, "{combine:?}: {checked}");
@@ -997,13 +1008,11 @@ mod tests {
 
     #[test]
     fn block_scores_equal_single_scores_bit_for_bit() {
-        let scene = synthetic_city(3, 5, 5);
-        let job = synthetic_job(5, 5);
-        let h = Hierarchy::build(&scene);
-        let ctx = Context::new(&scene, &h, None, &job, Control::default());
-        let pv = views::approximate(&ctx, &job, &Counters::new());
-        let cands = crate::candidates::generate(&ctx, &job, &pv);
-        let mut st = State::new(&ctx, &pv, &cands, None);
+        with_small_city(block_scores_check);
+    }
+
+    fn block_scores_check(ctx: &Context, pv: &ProblemViews, cands: &Candidates) {
+        let mut st = State::new(ctx, pv, cands, None);
         let blocks = blocks(&cands.list);
         // Blocks with several candidates exist (nested shafts).
         assert!(blocks.iter().any(|b| b.len() > 2));
