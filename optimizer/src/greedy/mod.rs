@@ -905,17 +905,6 @@ mod tests {
             };
             st.accept(best.id);
         }
-        // The objects' cost of cluster `n` in CPV `c`, when `c` lists it.
-        let pair_cost = |c: u32, n: u32| {
-            let kd = pv.cpvs[c as usize].kd;
-            cands
-                .pairs
-                .groups_of(n)
-                .indices()
-                .map(|g| cands.pairs.group(g as u32))
-                .filter(|gr| gr.kd == kd)
-                .find_map(|gr| cands.pairs.iter(gr).find(|&(x, _)| x == c).map(|p| p.1))
-        };
         let mut nodes: Vec<u32> = cands.list.iter().map(|c| c.node).collect();
         nodes.dedup();
         let (mut covered, mut adjusted) = (0, 0);
@@ -937,7 +926,10 @@ mod tests {
                     let mut want = orig;
                     let mut below = 0;
                     for &j in placed.iter().filter(|&&j| h.is_descendant(node_of(j), n)) {
-                        let own = pair_cost(c, node_of(j)).expect("a placed cluster is listed");
+                        let own = cands
+                            .pairs
+                            .cost_of(node_of(j), c)
+                            .expect("a placed cluster is listed");
                         let imp = impostor_cost(ctx, &cands.list[j as usize], &pv.cpvs[c as usize]);
                         want = want - own + imp;
                         below += 1;
