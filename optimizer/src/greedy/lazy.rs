@@ -5,7 +5,7 @@ use std::collections::BinaryHeap;
 
 use rayon::prelude::*;
 
-use super::{Key, Selection, State};
+use super::{Key, Selection, State, Walked};
 use crate::api::job::Job;
 use crate::candidates::{Candidate, Candidates};
 use crate::math::IdRange;
@@ -69,6 +69,10 @@ pub(super) fn blocks(cands: &[Candidate]) -> Vec<IdRange> {
     }
     out
 }
+
+/// A block's keys computed again: whether they are exact scores (else
+/// bounds), the keys, and what an exact scoring found in its groups.
+type Refreshed = (bool, Vec<f64>, Vec<(u32, Walked)>);
 
 /// Blocks of stale keys refreshed together in [`select_lazy`].
 pub const LAZY_BATCH: usize = 32;
@@ -232,20 +236,22 @@ pub(crate) fn select_lazy_with(
         }
         // Whether a key is current is found in parallel too: it walks the
         // cells the candidate serves.
-        let fresh: Vec<(bool, Vec<f64>)> = stale
+        let fresh: Vec<Refreshed> = stale
             .par_iter()
             .map(|e| {
                 let block = blocks[block_of(e)];
                 if current(e) {
-                    (true, st.score_block(block))
+                    let (scores, found) = st.score_block(block);
+                    (true, scores, found)
                 } else {
-                    (false, st.bound_block(block))
+                    (false, st.bound_block(block), Vec::new())
                 }
             })
             .collect();
-        for (e, (exact, scores)) in stale.iter().zip(fresh) {
+        for (e, (exact, scores, found)) in stale.iter().zip(fresh) {
             if exact {
                 st.sel.evaluations += scores.len() as u64;
+                st.note_walked(&found);
             } else {
                 st.sel.bounds += scores.len() as u64;
             }

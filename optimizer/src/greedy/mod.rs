@@ -7,8 +7,9 @@
 //! one cluster, angle and axis, which serve growing prefixes of the same
 //! cells) by their best candidate's key, stamped with the choice count it
 //! was computed at. A key is an upper bound of its block's scores or their
-//! exact value: bounds come from per-cell figures without walking any
-//! (CPV, cluster) pair ([`State::bound_block`]), so a block whose cells
+//! exact value: bounds come from per-cell figures, and per-group figures
+//! earlier exact scorings found, without walking any (CPV, cluster) pair
+//! ([`State::bound_block`]), so a block whose cells
 //! changed is first bounded and walked only if its bound still tops the
 //! heap. A current exact top is accepted. One walk over a block's cells
 //! gives every candidate's score (the sums are the same, bit for bit, as
@@ -167,6 +168,9 @@ struct State<'a> {
     /// from `excess` whenever one of them changes. No candidate gains more
     /// in the cell than this (see [`State::bound_block`]).
     cell_excess: Vec<f64>,
+    /// Per group: what the last exact scoring that walked it found
+    /// ([`State::note_walked`]); bounds use it beside the per-cell figures.
+    walked: Vec<Walked>,
     /// The most memory the impostors may take (`memory.budget_bytes`).
     budget: Option<u64>,
     /// The memory of every candidate accepted so far, counted once each,
@@ -201,6 +205,38 @@ fn impostor_cost(ctx: &Context, cand: &Candidate, cpv: &Cpv) -> Cost {
         s.radius,
         cpv.region.distance_to_point(s.center),
     )
+}
+
+/// The least `f32` not below `x` (finite `x`).
+fn f32_up(x: f64) -> f32 {
+    let f = x as f32;
+    if f64::from(f) < x { f.next_up() } else { f }
+}
+
+/// What an exact scoring found in one group (one cluster in one cell),
+/// over the CPVs still open to the cluster there (above `t_max`, cluster
+/// not covered), as times rounded up to an `f32` (infinity: not walked
+/// yet). Both only fall as the greedy goes on: a representation only
+/// loses the savings of impostors placed below, an excess only falls, and
+/// a CPV once solved or covered stays so. So a figure found at any time
+/// still bounds what any impostor of the cluster gains in the group.
+#[derive(Clone, Copy, Debug)]
+struct Walked {
+    /// The costliest representation of the cluster in an open CPV: no
+    /// impostor saves more in one CPV than it less the impostor's cost.
+    /// Impostors placed below leave it far under the cluster's whole cost,
+    /// the bound's figure before.
+    rep: f32,
+    /// The sum over the open CPVs of the least of the representation and
+    /// the CPV's excess: no impostor gains more in the group.
+    gain: f32,
+}
+
+impl Walked {
+    const NONE: Walked = Walked {
+        rep: f32::INFINITY,
+        gain: f32::INFINITY,
+    };
 }
 
 /// The effect of impostor `i` on one CPV.
@@ -268,6 +304,7 @@ impl<'a> State<'a> {
                 v
             },
             cell_excess: vec![0.0; pv.kd.len()],
+            walked: vec![Walked::NONE; cands.pairs.groups_len() as usize],
             budget,
             spent: 0,
             chosen: vec![false; cands.list.len()],
@@ -467,7 +504,7 @@ impl<'a> State<'a> {
 
     /// Walks the groups served by the candidates of one block, which serve
     /// growing prefixes of the same groups (see [`blocks`]), once for all
-    /// of them: `add(group, layers, active, sums)` adds each group's terms
+    /// of them: `add(id, group, layers, active, sums)` adds each group's terms
     /// for the layer counts `layers[l]`, `l` in `active`, to `sums[l]`.
     /// Returns each candidate's sum for its layer count: the terms of its
     /// own groups, in its served order, as a walk for it alone would add
@@ -475,7 +512,7 @@ impl<'a> State<'a> {
     fn walk_block(
         &self,
         block: IdRange,
-        mut add: impl FnMut(&Group, &[u32], &[usize], &mut [f64]),
+        mut add: impl FnMut(u32, &Group, &[u32], &[usize], &mut [f64]),
     ) -> Vec<f64> {
         let cands = &self.cands[block.indices()];
         let mut layers: Vec<u32> = cands.iter().map(|c| c.spec.layers).collect();
@@ -496,7 +533,7 @@ impl<'a> State<'a> {
         for (k, c) in cands.iter().enumerate() {
             let end = c.served.end as usize;
             for &g in &self.all.served[pos..end] {
-                add(self.all.pairs.group(g), &layers, &active, &mut sums);
+                add(g, self.all.pairs.group(g), &layers, &active, &mut sums);
             }
             pos = end;
             out.push(sums[idx[k]]);
@@ -507,15 +544,30 @@ impl<'a> State<'a> {
 
     /// The scores of the candidates of one block. Equal to
     /// [`score`](Self::score) of each, bit for bit, but the groups are
-    /// walked once for the whole block.
-    fn score_block(&self, block: IdRange) -> Vec<f64> {
+    /// walked once for the whole block. Also returns what the walk found in
+    /// each group, for [`note_walked`](Self::note_walked) (nothing in `max`
+    /// mode, whose bounds do not use it).
+    fn score_block(&self, block: IdRange) -> (Vec<f64>, Vec<(u32, Walked)>) {
         let node = self.cands[block.start as usize].node;
         let r = self.ctx.hierarchy.nodes[node as usize].sphere.radius;
+        let m = &self.ctx.model;
+        let adds = m.time_saved(Cost::default()).is_some();
         let mut imps: Vec<Cost> = Vec::new();
-        let sums = self.walk_block(block, |gr, layers, active, sums| {
+        let mut found: Vec<(u32, Walked)> = Vec::new();
+        let sums = self.walk_block(block, |g, gr, layers, active, sums| {
             if !self.any_open_in_cell(node, gr.kd) {
+                if adds {
+                    found.push((
+                        g,
+                        Walked {
+                            rep: 0.0,
+                            gain: 0.0,
+                        },
+                    ));
+                }
                 return;
             }
+            let (mut most, mut gain) = (0.0f64, 0.0f64);
             let px = self.ctx.model.pixels(r, gr.dist);
             imps.clear();
             imps.extend(
@@ -531,12 +583,41 @@ impl<'a> State<'a> {
                 let Some(rep) = self.representation(c, node, orig) else {
                     return;
                 };
+                if adds {
+                    let t = m.time_saved(rep).unwrap_or(0.0);
+                    most = most.max(t);
+                    gain += t.max(0.0).min(excess);
+                }
                 for (&l, &imp) in active.iter().zip(&imps) {
                     sums[l] += self.gain_over(c, rep, imp, excess);
                 }
             });
+            if adds {
+                // The sum in another order than a bound's: the slack covers
+                // the rounding.
+                let gain = gain.max(0.0) * (1.0 + 1e-9);
+                found.push((
+                    g,
+                    Walked {
+                        rep: f32_up(most),
+                        gain: f32_up(gain),
+                    },
+                ));
+            }
         });
-        self.per_byte(block, sums, 1.0)
+        (self.per_byte(block, sums, 1.0), found)
+    }
+
+    /// Keeps what an exact scoring found in its groups
+    /// ([`score_block`](Self::score_block)), where lower than what is held.
+    /// Applied between batches, in batch order, so a bound never depends on
+    /// which thread ran first.
+    fn note_walked(&mut self, found: &[(u32, Walked)]) {
+        for &(g, f) in found {
+            let w = &mut self.walked[g as usize];
+            w.rep = w.rep.min(f.rep);
+            w.gain = w.gain.min(f.gain);
+        }
     }
 
     /// Divides each candidate's sum by its memory, after scaling by `scale`.
@@ -557,14 +638,17 @@ impl<'a> State<'a> {
     /// cell's summed excess, `n` the number of its open CPVs (above
     /// `t_max`, cluster not covered; [`open_in_cell`](Self::open_in_cell)),
     /// at most the group's pairs, and `T` that saving; in `max` mode only `E`
-    /// bounds it. Exact sums of these terms bound the scores; the
+    /// bounds it. Where an exact scoring has walked the group, `T` is the
+    /// saving against the costliest representation it found in an open CPV
+    /// instead, if less, and the group gains at most the sum it found
+    /// ([`Walked`]). Exact sums of these terms bound the scores; the
     /// floating-point sums are raised by a relative 1e-9, far above their
     /// rounding.
     fn bound_block(&self, block: IdRange) -> Vec<f64> {
         let node = self.cands[block.start as usize].node;
         let r = self.ctx.hierarchy.nodes[node as usize].sphere.radius;
         let m = &self.ctx.model;
-        let sums = self.walk_block(block, |gr, layers, active, sums| {
+        let sums = self.walk_block(block, |g, gr, layers, active, sums| {
             let n = self.open_in_cell(node, gr.kd);
             if n == 0 {
                 return;
@@ -576,6 +660,9 @@ impl<'a> State<'a> {
                 }
                 return;
             };
+            let walked = self.walked[g as usize];
+            let whole = whole.min(f64::from(walked.rep));
+            let e = e.min(f64::from(walked.gain));
             let n = f64::from(gr.len.min(n));
             let px = m.pixels(r, gr.dist);
             for &l in active {
@@ -967,22 +1054,28 @@ mod tests {
             let cands = crate::candidates::generate(&ctx, &job, &pv);
             let mut st = State::new(&ctx, &pv, &cands, None);
             let blocks = blocks(&cands.list);
-            let (mut checked, mut tight) = (0, 0);
+            let (mut checked, mut tight, mut lowered) = (0, 0, 0);
             for round in 0..12 {
                 for (i, &b) in blocks.iter().enumerate() {
                     if i as u32 != b.start {
                         continue;
                     }
-                    let exact = st.score_block(b);
+                    let (exact, found) = st.score_block(b);
+                    // With the representations earlier rounds' scorings
+                    // found, then with this one's too: never looser.
+                    let before = st.bound_block(b);
+                    st.note_walked(&found);
                     let bound = st.bound_block(b);
-                    for (k, (&e, &u)) in exact.iter().zip(&bound).enumerate() {
+                    for (k, ((&e, &u0), &u)) in exact.iter().zip(&before).zip(&bound).enumerate() {
+                        let cand = b.start as usize + k;
+                        assert!(u0 >= e, "{combine:?} round {round} cand {cand}: {u0} < {e}");
                         assert!(
-                            u >= e,
-                            "{combine:?} round {round} cand {}: {u} < {e}",
-                            b.start as usize + k
+                            u >= e && u <= u0,
+                            "{combine:?} round {round} cand {cand}: {u}"
                         );
                         checked += 1;
                         tight += usize::from(e > 0.0 && u < 1.5 * e);
+                        lowered += usize::from(u < u0);
                     }
                 }
                 let Some(best) = best_by_score(&st) else {
@@ -991,6 +1084,13 @@ mod tests {
                 st.accept(best.id);
             }
             assert!(checked > 1000, "{combine:?}: {checked}");
+            // Where times add up, the representations found lower bounds
+            // (descendant impostors placed, CPVs solved); `max` ignores them.
+            if combine == Combine::Max {
+                assert_eq!(lowered, 0);
+            } else {
+                assert!(lowered > 100, "{combine:?}: {lowered} of {checked} lowered");
+            }
             // Informative where times add up: many bounds within 1.5x.
             if combine != Combine::Max {
                 assert!(tight > checked / 20, "{combine:?}: {tight} of {checked}");
@@ -1013,7 +1113,7 @@ mod tests {
                 if i as u32 == b.start {
                     let single: Vec<u64> =
                         (b.start..b.end).map(|k| st.score(k).to_bits()).collect();
-                    let block: Vec<u64> = st.score_block(b).iter().map(|s| s.to_bits()).collect();
+                    let block: Vec<u64> = st.score_block(b).0.iter().map(|s| s.to_bits()).collect();
                     assert_eq!(single, block, "block {b:?}");
                 }
             }

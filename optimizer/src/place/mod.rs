@@ -474,9 +474,9 @@ pub const GREEDY_BYTES_PER_PAIR: u64 = 4;
 pub const BYTES_PER_STORED: u64 = 16;
 
 /// Bytes a run holds per group (one cluster's pairs in one cell), besides
-/// its served-list entries: the group itself (48 bytes) and the allocator's
-/// slack.
-pub const BYTES_PER_GROUP: u64 = 56;
+/// its served-list entries: the group itself (48 bytes), what the greedy's
+/// exact scorings found in it (8 bytes) and the allocator's slack.
+pub const BYTES_PER_GROUP: u64 = 64;
 
 /// Bytes per entry of the candidates' served lists: the group id (4
 /// bytes) and its share of the candidates (about 130 bytes each; 1–13
