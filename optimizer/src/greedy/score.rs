@@ -29,8 +29,10 @@ pub(super) struct Walked {
     /// Impostors placed below leave it far under the cluster's whole cost,
     /// the bound's figure before.
     rep: f32,
-    /// The sum over the open CPVs of the least of the representation and
-    /// the CPV's excess: no impostor gains more in the group.
+    /// The sum over the open CPVs of the least of the CPV's excess and
+    /// what a one-layer impostor of the cluster saves against the
+    /// representation: no impostor gains more in the group (one of more
+    /// layers costs more, its saving is less).
     gain: f32,
 }
 
@@ -137,6 +139,8 @@ impl State<'_> {
             }
             let (mut most, mut gain) = (0.0f64, 0.0f64);
             let px = self.ctx.model.pixels(r, gr.dist);
+            // The cheapest impostor of the cluster here, for `gain`.
+            let least = m.impostor_covering(1, px);
             imps.clear();
             imps.extend(
                 active
@@ -152,9 +156,8 @@ impl State<'_> {
                     return;
                 };
                 if adds {
-                    let t = m.time_saved(rep).unwrap_or(0.0);
-                    most = most.max(t);
-                    gain += t.max(0.0).min(excess);
+                    most = most.max(m.time_saved(rep).unwrap_or(0.0));
+                    gain += m.time_saved(rep - least).unwrap_or(0.0).max(0.0).min(excess);
                 }
                 for (&l, &imp) in active.iter().zip(&imps) {
                     sums[l] += self.gain_over(c, rep, imp, excess);
