@@ -157,11 +157,7 @@ impl State<'_> {
                 };
                 if adds {
                     most = most.max(m.time_saved(rep).unwrap_or(0.0));
-                    gain += m
-                        .time_saved(rep - least)
-                        .unwrap_or(0.0)
-                        .max(0.0)
-                        .min(excess);
+                    gain += self.gain_over(c, rep, least, excess);
                 }
                 for (&l, &imp) in active.iter().zip(&imps) {
                     sums[l] += self.gain_over(c, rep, imp, excess);
