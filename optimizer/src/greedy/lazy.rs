@@ -276,6 +276,7 @@ pub(crate) fn select_lazy_with(
             compact_at = compact_at.max(2 * heap.len());
         }
     }
+    st.sel.drop_replaced(&st.lineage);
     if !ctx.cancelled() {
         st.sel.reasons = st.explain_unsolved(job);
     }

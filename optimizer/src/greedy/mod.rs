@@ -34,6 +34,7 @@ use crate::api::placement::UnsolvedReason;
 use crate::candidates::{Candidate, Candidates, Group};
 use crate::math::IdRange;
 use crate::model::cost::Cost;
+use crate::scene::hierarchy::Hierarchy;
 use crate::views::{Context, Cpv, ProblemViews};
 
 mod explain;
@@ -100,11 +101,91 @@ impl Selection {
             .sum()
     }
 
+    /// Drops from each CPV's list the impostors that an impostor of an
+    /// ancestor cluster, listed after them, replaces there, and counts each
+    /// candidate's uses again: the lists and uses as if every accept had
+    /// removed what it replaced at once. (In a list, an impostor follows
+    /// every impostor of a descendant cluster it replaces, and none is
+    /// listed after an impostor of an ancestor: the cluster is covered
+    /// there.)
+    fn drop_replaced(&mut self, lineage: &Lineage) {
+        self.cpv_impostors.par_iter_mut().enumerate().for_each_init(
+            || vec![u32::MAX; lineage.up.len()],
+            |seen, (c, list)| lineage.drop_replaced(list, seen, c as u32),
+        );
+        self.uses.iter_mut().for_each(|u| *u = 0);
+        for list in &self.cpv_impostors {
+            for &j in list {
+                self.uses[j as usize] += 1;
+            }
+        }
+    }
+
     /// Candidate ids of the final impostors, ascending.
     pub fn impostors(&self) -> Vec<u32> {
         (0..self.uses.len() as u32)
             .filter(|&i| self.uses[i as usize] > 0)
             .collect()
+    }
+}
+
+/// What finding replaced impostors in a CPV's list reads, packed: per
+/// hierarchy node its nearest ancestor with candidates (only those are
+/// ever impostors), per candidate its cluster.
+struct Lineage {
+    /// Per node: the nearest ancestor with candidates, `u32::MAX` if none.
+    up: Vec<u32>,
+    /// Per candidate: its cluster.
+    node: Vec<u32>,
+}
+
+impl Lineage {
+    fn new(h: &Hierarchy, cands: &[Candidate], has_candidates: &[bool]) -> Lineage {
+        // Pre-order: a parent's id is below its children's.
+        let mut up = vec![u32::MAX; h.nodes.len()];
+        for n in 1..h.nodes.len() {
+            let p = h.nodes[n].parent;
+            if p != u32::MAX {
+                up[n] = if has_candidates[p as usize] {
+                    p
+                } else {
+                    up[p as usize]
+                };
+            }
+        }
+        Lineage {
+            up,
+            node: cands.iter().map(|c| c.node).collect(),
+        }
+    }
+
+    /// Drops from `list`, one CPV's impostors in the order they were
+    /// accepted, those that an impostor of an ancestor cluster listed after
+    /// them replaces (see [`Selection::drop_replaced`]). `seen` has an entry
+    /// per hierarchy node, none of them `stamp`.
+    fn drop_replaced(&self, list: &mut Vec<u32>, seen: &mut [u32], stamp: u32) {
+        // Backwards: a node is marked once an impostor of it is kept; one
+        // with a marked ancestor is replaced.
+        let mut keep = vec![true; list.len()];
+        for (k, &j) in list.iter().enumerate().rev() {
+            let n = self.node[j as usize];
+            let mut up = self.up[n as usize];
+            while up != u32::MAX {
+                if seen[up as usize] == stamp {
+                    keep[k] = false;
+                    break;
+                }
+                up = self.up[up as usize];
+            }
+            if keep[k] {
+                seen[n as usize] = stamp;
+            }
+        }
+        let mut k = 0;
+        list.retain(|_| {
+            k += 1;
+            keep[k - 1]
+        });
     }
 }
 
@@ -158,6 +239,11 @@ struct State<'a> {
     /// serves, so a key computed after choice `v` is still exact while no
     /// cell it serves changed after `v`.
     cell_changed: Vec<u64>,
+    /// Per hierarchy node, scratch marks for dropping replaced impostors
+    /// from a full list (see [`Lineage::drop_replaced`]), and the last stamp.
+    seen: Vec<u32>,
+    stamp: u32,
+    lineage: Lineage,
     /// Per CPV: its frame time less `t_max` (solved when not above 0),
     /// kept with `sel.cpv_cost`.
     excess: Vec<f64>,
@@ -237,6 +323,14 @@ impl<'a> State<'a> {
         given_up: &[u64],
     ) -> Self {
         let target = |c: usize| target_of(ctx, given_up, c);
+        let has_candidates = {
+            let mut v = vec![false; ctx.hierarchy.nodes.len()];
+            for c in &cands.list {
+                v[c.node as usize] = true;
+            }
+            v
+        };
+        let lineage = Lineage::new(ctx.hierarchy, &cands.list, &has_candidates);
         let mut st = State {
             ctx,
             pv,
@@ -244,13 +338,8 @@ impl<'a> State<'a> {
             all: cands,
             adjustments: vec![Adjustments::default(); ctx.hierarchy.nodes.len()],
             marks: NodeMarks::new(pv.cpvs.len(), ctx.hierarchy.nodes.len()),
-            has_candidates: {
-                let mut v = vec![false; ctx.hierarchy.nodes.len()];
-                for c in &cands.list {
-                    v[c.node as usize] = true;
-                }
-                v
-            },
+            has_candidates,
+            lineage,
             unsolved_in_cell: {
                 let mut v = vec![0u32; pv.kd.len()];
                 for (i, c) in pv.cpvs.iter().enumerate() {
@@ -259,6 +348,8 @@ impl<'a> State<'a> {
                 v
             },
             cell_changed: vec![0; pv.kd.len()],
+            seen: vec![u32::MAX; ctx.hierarchy.nodes.len()],
+            stamp: 0,
             excess: pv
                 .cpvs
                 .iter()
@@ -485,31 +576,31 @@ impl<'a> State<'a> {
         chain.reverse();
         self.marks
             .adjust_all(&chain, &savings, &mut self.adjustments);
-        // Only a cluster adjusted in a CPV has impostors below it there.
-        let below: Vec<bool> = changes
-            .iter()
-            .map(|&(c, _, _)| matches!(self.marks.get(c, node), Mark::Adjusted(_)))
-            .collect();
         self.marks
             .cover_all(node, end, changes.iter().map(|&(c, _, _)| c));
+        // The impostors this one replaces stay in the CPVs' lists until
+        // the greedy ends (`Selection::drop_replaced`): nothing reads the
+        // lists before, and a list is long where the view reaches far.
         let mut changed_cells: Vec<u32> = Vec::new();
-        for ((c, cost, _), below) in changes.into_iter().zip(below) {
+        for (c, cost, _) in changes {
             let cu = c as usize;
             let cpv = &self.pv.cpvs[cu];
-            let imps = &mut self.sel.cpv_impostors[cu];
-            if below {
-                let cands = self.cands;
-                let uses = &mut self.sel.uses;
-                imps.retain(|&j| {
-                    let replaced = h.is_descendant(cands[j as usize].node, node);
-                    if replaced {
-                        uses[j as usize] -= 1;
-                    }
-                    !replaced
-                });
+            let list = &mut self.sel.cpv_impostors[cu];
+            if list.len() == list.capacity() && !list.is_empty() {
+                // Full: what is replaced goes before the list grows.
+                self.stamp = self.stamp.wrapping_add(1);
+                if self.stamp == u32::MAX {
+                    self.seen.iter_mut().for_each(|s| *s = u32::MAX);
+                    self.stamp = 0;
+                }
+                self.lineage.drop_replaced(list, &mut self.seen, self.stamp);
+                // At least half the list free before the next look, so
+                // each entry is looked at a bounded number of times.
+                if list.len() > list.capacity() / 2 {
+                    list.reserve(list.len());
+                }
             }
-            imps.push(i);
-            self.sel.uses[i as usize] += 1;
+            list.push(i);
             let excess = self.ctx.model.frame_time(cost) - self.target(c);
             if self.excess[cu] > 0.0 && excess <= 0.0 {
                 self.unsolved_in_cell[cpv.kd as usize] -= 1;
@@ -564,6 +655,7 @@ pub fn select_naive(ctx: &Context, job: &Job, pv: &ProblemViews, cands: &Candida
             None => break,
         }
     }
+    st.sel.drop_replaced(&st.lineage);
     st.sel.reasons = st.explain_unsolved(job);
     st.sel
 }
@@ -749,14 +841,41 @@ mod tests {
     }
 
     fn representations_check(ctx: &Context, pv: &ProblemViews, cands: &Candidates) {
-        let h = ctx.hierarchy;
         let mut st = State::new(ctx, pv, cands, None);
-        for _ in 0..24 {
-            let Some(best) = best_by_score(&st) else {
-                break;
-            };
-            st.accept(best.id);
+        let mut replaced = 0;
+        for choices in [24, 400] {
+            while st.sel.accepted < choices {
+                let Some(best) = best_by_score(&st) else {
+                    break;
+                };
+                st.accept(best.id);
+            }
+            let before: usize = st.sel.cpv_impostors.iter().map(Vec::len).sum();
+            st.sel.drop_replaced(&st.lineage);
+            replaced += before - st.sel.cpv_impostors.iter().map(Vec::len).sum::<usize>();
+            representations_match(ctx, pv, cands, &st);
         }
+        // Impostors were replaced, and lists long enough to be looked
+        // through when full.
+        assert!(replaced > 0);
+        assert!(st.sel.cpv_impostors.iter().any(|l| l.len() > 8));
+    }
+
+    /// Every CPV's impostors are an antichain of clusters, their uses
+    /// count them, and the representations are what they say.
+    fn representations_match(ctx: &Context, pv: &ProblemViews, cands: &Candidates, st: &State) {
+        let h = ctx.hierarchy;
+        let node_of = |j: u32| cands.list[j as usize].node;
+        let mut uses = vec![0u32; cands.list.len()];
+        for list in &st.sel.cpv_impostors {
+            for &a in list {
+                uses[a as usize] += 1;
+                for &b in list {
+                    assert!(!h.is_descendant(node_of(a), node_of(b)), "{list:?}");
+                }
+            }
+        }
+        assert_eq!(uses, st.sel.uses);
         let mut nodes: Vec<u32> = cands.list.iter().map(|c| c.node).collect();
         nodes.dedup();
         let (mut covered, mut adjusted) = (0, 0);
@@ -765,7 +884,6 @@ mod tests {
                 let gr = cands.pairs.group(g as u32);
                 for (c, orig) in cands.pairs.iter(gr) {
                     let placed = &st.sel.cpv_impostors[c as usize];
-                    let node_of = |j: u32| cands.list[j as usize].node;
                     let rep = st.representation(c, n, orig);
                     if placed
                         .iter()
@@ -800,6 +918,32 @@ mod tests {
             covered > 100 && adjusted > 100,
             "covered {covered}, adjusted {adjusted}"
         );
+    }
+
+    /// Of a CPV's impostors in the order accepted, those with an impostor
+    /// of an ancestor cluster after them are dropped, the others kept in
+    /// their order; a scratch mark of another stamp counts for nothing.
+    #[test]
+    fn replaced_impostors_are_those_below_a_later_one() {
+        // Nodes 0 → {1 → {2, 4}, 3}; node 0 has no candidate, so the
+        // nearest ancestor with candidates of 1 and 3 is none. Candidate
+        // k is of node k (candidate 0 unused).
+        let lineage = Lineage {
+            up: vec![u32::MAX, u32::MAX, 1, u32::MAX, 1],
+            node: vec![0, 1, 2, 3, 4],
+        };
+        let mut seen = vec![7u32; 5];
+        let mut list = vec![2, 3, 4, 1, 2];
+        lineage.drop_replaced(&mut list, &mut seen, 9);
+        // 2 and 4 lie below 1, accepted after them; the last 2 stays.
+        assert_eq!(list, vec![3, 1, 2]);
+        let mut seen = vec![9u32; 5];
+        let mut list = vec![1, 3];
+        lineage.drop_replaced(&mut list, &mut seen, 10);
+        assert_eq!(list, vec![1, 3]);
+        let mut list = vec![4, 3, 1];
+        lineage.drop_replaced(&mut list, &mut seen, 11);
+        assert_eq!(list, vec![3, 1]);
     }
 
     /// A block's bounds are never below its exact scores, in every
