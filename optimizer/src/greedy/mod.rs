@@ -578,9 +578,10 @@ impl<'a> State<'a> {
             .adjust_all(&chain, &savings, &mut self.adjustments);
         self.marks
             .cover_all(node, end, changes.iter().map(|&(c, _, _)| c));
-        // The impostors this one replaces stay in the CPVs' lists until
-        // the greedy ends (`Selection::drop_replaced`): nothing reads the
-        // lists before, and a list is long where the view reaches far.
+        // The impostors this one replaces stay in the CPVs' lists until a
+        // list is full or the greedy ends (`Selection::drop_replaced`):
+        // nothing reads the lists before, and a list is long where the
+        // view reaches far.
         let mut changed_cells: Vec<u32> = Vec::new();
         for (c, cost, _) in changes {
             let cu = c as usize;
