@@ -129,9 +129,9 @@ impl Selection {
     }
 }
 
-/// What finding replaced impostors in a CPV's list reads, packed: per
-/// hierarchy node its nearest ancestor with candidates (only those are
-/// ever impostors), per candidate its cluster.
+/// Per hierarchy node its nearest ancestor with candidates (only those are
+/// ever impostors or scored: the chain an accept adjusts), per candidate its
+/// cluster: what finding replaced impostors in a CPV's list reads, packed.
 struct Lineage {
     /// Per node: the nearest ancestor with candidates, `u32::MAX` if none.
     up: Vec<u32>,
@@ -140,7 +140,11 @@ struct Lineage {
 }
 
 impl Lineage {
-    fn new(h: &Hierarchy, cands: &[Candidate], has_candidates: &[bool]) -> Lineage {
+    fn new(h: &Hierarchy, cands: &[Candidate]) -> Lineage {
+        let mut has_candidates = vec![false; h.nodes.len()];
+        for c in cands {
+            has_candidates[c.node as usize] = true;
+        }
         // Pre-order: a parent's id is below its children's.
         let mut up = vec![u32::MAX; h.nodes.len()];
         for n in 1..h.nodes.len() {
@@ -228,8 +232,6 @@ struct State<'a> {
     /// objects' cost minus its adjustment (set on every ancestor of an
     /// impostor that has candidates: no other representation is read).
     marks: NodeMarks,
-    /// Per cluster: some candidate is an impostor of it.
-    has_candidates: Vec<bool>,
     /// Per kd node (cell): how many of its CPVs are still above `t_max`. A
     /// solved CPV adds nothing to any score, so cells without unsolved CPVs
     /// are skipped when scoring.
@@ -243,6 +245,8 @@ struct State<'a> {
     /// from a full list (see [`Lineage::drop_replaced`]), and the last stamp.
     seen: Vec<u32>,
     stamp: u32,
+    /// Each cluster's nearest ancestor with candidates: the chain an
+    /// accept adjusts, and what finds replaced impostors.
     lineage: Lineage,
     /// Per CPV: its frame time less `t_max` (solved when not above 0),
     /// kept with `sel.cpv_cost`.
@@ -323,14 +327,7 @@ impl<'a> State<'a> {
         given_up: &[u64],
     ) -> Self {
         let target = |c: usize| target_of(ctx, given_up, c);
-        let has_candidates = {
-            let mut v = vec![false; ctx.hierarchy.nodes.len()];
-            for c in &cands.list {
-                v[c.node as usize] = true;
-            }
-            v
-        };
-        let lineage = Lineage::new(ctx.hierarchy, &cands.list, &has_candidates);
+        let lineage = Lineage::new(ctx.hierarchy, &cands.list);
         let mut st = State {
             ctx,
             pv,
@@ -338,7 +335,6 @@ impl<'a> State<'a> {
             all: cands,
             adjustments: vec![Adjustments::default(); ctx.hierarchy.nodes.len()],
             marks: NodeMarks::new(pv.cpvs.len(), ctx.hierarchy.nodes.len()),
-            has_candidates,
             lineage,
             unsolved_in_cell: {
                 let mut v = vec![0u32; pv.kd.len()];
@@ -566,12 +562,10 @@ impl<'a> State<'a> {
         let end = h.nodes[node as usize].subtree_end;
         let savings: Vec<(u32, Cost)> = changes.iter().map(|&(c, _, s)| (c, s)).collect();
         let mut chain = Vec::new();
-        let mut up = h.nodes[node as usize].parent;
+        let mut up = self.lineage.up[node as usize];
         while up != u32::MAX {
-            if self.has_candidates[up as usize] {
-                chain.push(up);
-            }
-            up = h.nodes[up as usize].parent;
+            chain.push(up);
+            up = self.lineage.up[up as usize];
         }
         chain.reverse();
         self.marks
