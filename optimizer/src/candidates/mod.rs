@@ -35,8 +35,10 @@ use crate::model::impostor::{ImpostorModel, ImpostorSpec, ViewCell};
 use crate::views::{Context, ProblemViews};
 
 mod pairs;
+mod served;
 mod shaft;
 pub use pairs::{Group, Pairs};
+pub use served::{NARROW_GROUPS, Served, ServedIds};
 pub use shaft::AxisGrid;
 use shaft::{
     cone_half_angle, distinct_corners, fit_cones, half_angles, ladder_distance, ladder_index,
@@ -67,8 +69,8 @@ pub struct Candidates {
     pub list: Vec<Candidate>,
     /// The (cluster, CPV) pairs, by cluster and cell.
     pub pairs: Pairs,
-    /// Group ids served by the candidates (see `Candidate::served`).
-    pub served: Vec<u32>,
+    /// The groups served by the candidates (see `Candidate::served`).
+    pub served: Served,
 }
 
 impl Candidates {
@@ -77,11 +79,25 @@ impl Candidates {
     /// may accelerate its cell), with the cost of the cluster's objects in
     /// the CPV's enclosing set.
     pub fn for_each_served(&self, i: u32, mut f: impl FnMut(u32, Cost)) {
-        for &g in &self.served[self.list[i as usize].served.indices()] {
+        for g in self.groups_served(i) {
             for (c, cost) in self.pairs.iter(self.pairs.group(g)) {
                 f(c, cost);
             }
         }
+    }
+
+    /// The group ids candidate `i` serves.
+    #[inline]
+    pub fn groups_served(&self, i: u32) -> ServedIds<'_> {
+        let c = &self.list[i as usize];
+        self.served_range(c.node, c.served.indices())
+    }
+
+    /// The group ids of served entries `range`, which belong to candidates
+    /// of cluster `node`.
+    #[inline]
+    pub fn served_range(&self, node: u32, range: std::ops::Range<usize>) -> ServedIds<'_> {
+        self.served.ids(self.pairs.groups_of(node).start, range)
     }
 }
 
@@ -215,7 +231,7 @@ pub fn generate(ctx: &Context, job: &Job, pv: &ProblemViews) -> Candidates {
     }
 
     // Per cluster: the candidates and, for each, the local list of groups it
-    // serves.
+    // serves (as offsets from the cluster's first group).
     let per_node: Vec<(Vec<Candidate>, Vec<u32>)> = (0..h.nodes.len() as u32)
         .into_par_iter()
         .map(|n| {
@@ -243,7 +259,7 @@ pub fn generate(ctx: &Context, job: &Job, pv: &ProblemViews) -> Candidates {
                 let gr = pairs.group(g);
                 let first = &pv.cpvs[pairs.first_cpv(gr) as usize];
                 let region = first.region;
-                let dist = gr.dist;
+                let dist = pairs.dist(gr, sphere.center);
                 // Some CPV of the cell is accelerated by an impostor of `spec`.
                 let helps = |spec: &ImpostorSpec| {
                     let imp = ctx.model.impostor(spec.layers, sphere.radius, dist);
@@ -337,7 +353,7 @@ pub fn generate(ctx: &Context, job: &Job, pv: &ProblemViews) -> Candidates {
                     e += 1;
                 }
                 let start = served.len() as u32;
-                served.extend(tuples[i..e].iter().map(|t| t.1));
+                served.extend(tuples[i..e].iter().map(|t| t.1 - g0));
                 // The block's candidates: one per distinct key, serving the
                 // block's prefix up to the end of its key.
                 let mut ends: Vec<usize> = Vec::new();
@@ -392,7 +408,7 @@ pub fn generate(ctx: &Context, job: &Job, pv: &ProblemViews) -> Candidates {
                             // cells are served, at the resolution and layer
                             // count their distance needs.
                             for &(_, g) in &tuples[s..t] {
-                                nearest = nearest.min(pairs.group(g).dist);
+                                nearest = nearest.min(pairs.dist(pairs.group(g), sphere.center));
                             }
                             let d = ladder_distance(size, k, steps).max(nearest);
                             // Likewise it narrows to the smallest cone
@@ -465,15 +481,22 @@ pub fn generate(ctx: &Context, job: &Job, pv: &ProblemViews) -> Candidates {
     // Moved out cluster by cluster into vectors of their final size, so
     // the candidates are not held twice.
     let mut list = Vec::with_capacity(per_node.iter().map(|p| p.0.len()).sum());
-    let mut served = Vec::with_capacity(per_node.iter().map(|p| p.1.len()).sum());
+    let total = per_node.iter().map(|p| p.1.len()).sum();
+    let mut offset = 0u32;
+    let mut locals = Vec::with_capacity(per_node.len());
     for (mut cands, local) in per_node {
-        let offset = served.len() as u32;
         for c in &mut cands {
             c.served = IdRange::new(c.served.start + offset, c.served.end + offset);
         }
+        offset += local.len() as u32;
         list.extend(cands);
-        served.extend(local);
+        locals.push(local);
     }
+    let widest = (0..h.nodes.len() as u32)
+        .map(|n| pairs.groups_of(n).len())
+        .max()
+        .unwrap_or(0);
+    let served = Served::new(locals, total, widest);
     Candidates {
         list,
         pairs,

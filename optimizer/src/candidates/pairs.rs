@@ -14,9 +14,11 @@
 //! whole cost). Memory then follows the cut, not every cluster a CPV sees:
 //! seen from above, a tenth of the pairs are explicit.
 
+use glam::DVec3;
 use rayon::prelude::*;
 
 use crate::math::IdRange;
+use crate::math::geom::Aabb;
 use crate::model::cost::Cost;
 use crate::views::{
     CellCuts, Context, CpvCut, Listable, PairCounts, ProblemViews, RegionCosts, cpv_cut,
@@ -41,13 +43,13 @@ pub struct Group {
     /// First of its words in `bits` (bit `i`: the cell's `i`-th CPV lists
     /// the cluster below a cut node); `NONE` when no CPV does.
     bits: u32,
-    /// Distance from the cell's region to the cluster's sphere centre; all
-    /// CPVs of the group share it, hence an impostor's cost there.
-    pub dist: f64,
     /// The cluster's whole cost seen from the cell: its cost in the CPVs
     /// whose pairs store none.
     pub whole: Cost,
 }
+
+// The groups are the largest part of the pairs (66 M on the scale-4 city).
+const _: () = assert!(std::mem::size_of::<Group>() == 40);
 
 /// The pairs of every CPV, grouped by cluster (node id) and, within a
 /// cluster, by cell, CPV ids ascending.
@@ -62,6 +64,9 @@ pub struct Pairs {
     bits: Vec<u64>,
     /// Per kd node: its CPVs (empty for all but cells with CPVs).
     cells: Vec<IdRange>,
+    /// Per kd node: the region its CPVs share (empty for all but cells
+    /// with CPVs).
+    regions: Vec<Aabb>,
     /// The groups, by cluster and cell.
     groups: Vec<Group>,
     /// Per cluster: its groups are `node_groups[n]..node_groups[n + 1]`.
@@ -154,6 +159,15 @@ impl Pairs {
     /// Group `g`.
     pub fn group(&self, g: u32) -> &Group {
         &self.groups[g as usize]
+    }
+
+    /// Distance from the region of group `g`'s CPVs to `center` (that of
+    /// the group's cluster's sphere): all CPVs of a group share it, hence
+    /// an impostor's cost there. Computed where needed rather than held
+    /// by each group.
+    #[inline]
+    pub fn dist(&self, g: &Group, center: DVec3) -> f64 {
+        self.regions[g.kd as usize].distance_to_point(center)
     }
 
     /// The group ids of cluster `n`, by cell.
@@ -289,15 +303,17 @@ impl Pairs {
                 kd: 0,
                 stored: 0,
                 bits: NONE,
-                dist: 0.0,
                 whole: Cost::default(),
             };
             t.cells as usize
         ];
         let mut cells = vec![IdRange::default(); pv.kd.len()];
+        let mut regions = vec![Aabb::EMPTY; pv.kd.len()];
         let cell_ranges = pv.cells();
         for r in &cell_ranges {
-            cells[pv.cpvs[r.start as usize].kd as usize] = *r;
+            let first = &pv.cpvs[r.start as usize];
+            cells[first.kd as usize] = *r;
+            regions[first.kd as usize] = first.region;
         }
         let mut len = 0u64;
         for chunk in cell_ranges.chunks(16) {
@@ -339,9 +355,6 @@ impl Pairs {
                         kd: first.kd,
                         stored: stored_at,
                         bits: group_bits,
-                        dist: first
-                            .region
-                            .distance_to_point(ctx.hierarchy.nodes[gr.node as usize].sphere.center),
                         whole: gr.whole,
                     };
                     f[2] += 1;
@@ -355,6 +368,7 @@ impl Pairs {
             stored,
             bits,
             cells,
+            regions,
             groups,
             node_groups,
             len,

@@ -79,7 +79,13 @@ impl State<'_> {
                         }
                         let o = *seen.get_or_insert_with(|| {
                             let region = self.pv.cpvs[c as usize].region;
-                            outlook(job, &imodel, &sphere, &region, gr.dist)
+                            outlook(
+                                job,
+                                &imodel,
+                                &sphere,
+                                &region,
+                                all.pairs.dist(gr, sphere.center),
+                            )
                         });
                         out.push((c, o as usize, orig.cpu + orig.gpu));
                     }

@@ -26,7 +26,7 @@ pub(super) struct NodeMarks {
 /// outnumber the rest.
 #[derive(Clone, Debug, Default)]
 pub(super) struct Adjustments {
-    idx: Vec<u32>,
+    idx: Indices,
     values: Vec<Cost>,
     /// Values kept by the last compaction.
     kept: usize,
@@ -39,7 +39,7 @@ impl Adjustments {
     /// The adjustment at rank `k`.
     #[inline]
     pub(super) fn get(&self, k: usize) -> Cost {
-        self.values[self.idx[k] as usize]
+        self.values[self.idx.get(k) as usize]
     }
 
     /// The value `sum(old value)` for a saving with bits `bits`: the one
@@ -79,13 +79,16 @@ impl Adjustments {
         }
         let mut map = vec![NO_VALUE; self.values.len()];
         let mut kept = Vec::new();
-        for i in &mut self.idx {
-            if map[*i as usize] == NO_VALUE {
-                map[*i as usize] = kept.len() as u32;
-                kept.push(self.values[*i as usize]);
+        let mut renumbered = Vec::with_capacity(self.idx.len());
+        for k in 0..self.idx.len() {
+            let i = self.idx.get(k) as usize;
+            if map[i] == NO_VALUE {
+                map[i] = kept.len() as u32;
+                kept.push(self.values[i]);
             }
-            *i = map[*i as usize];
+            renumbered.push(map[i]);
         }
+        self.idx = Indices::from(renumbered);
         self.kept = kept.len();
         self.values = kept;
     }
@@ -94,6 +97,94 @@ impl Adjustments {
     #[cfg(test)]
     pub(super) fn sizes(&self) -> (usize, usize) {
         (self.idx.len(), self.values.len())
+    }
+}
+
+/// The value indices of a cluster's adjustments, two bytes each while the
+/// cluster has no more than 65,536 values (nearly all do: a cell's CPVs
+/// share values), four once it has more: the adjustments are the largest
+/// thing the greedy adds as it goes.
+#[derive(Clone, Debug)]
+enum Indices {
+    Narrow(Vec<u16>),
+    Wide(Vec<u32>),
+}
+
+impl Default for Indices {
+    fn default() -> Self {
+        Indices::Narrow(Vec::new())
+    }
+}
+
+impl From<Vec<u32>> for Indices {
+    /// Narrow when every index fits in two bytes.
+    fn from(v: Vec<u32>) -> Self {
+        if v.iter().all(|&i| i <= u32::from(u16::MAX)) {
+            Indices::Narrow(v.into_iter().map(|i| i as u16).collect())
+        } else {
+            Indices::Wide(v)
+        }
+    }
+}
+
+impl Indices {
+    #[inline]
+    fn get(&self, k: usize) -> u32 {
+        match self {
+            Indices::Narrow(v) => u32::from(v[k]),
+            Indices::Wide(v) => v[k],
+        }
+    }
+
+    fn len(&self) -> usize {
+        match self {
+            Indices::Narrow(v) => v.len(),
+            Indices::Wide(v) => v.len(),
+        }
+    }
+
+    /// Sets index `k` to `i`, widening every index first where `i` does
+    /// not fit in two bytes.
+    #[inline]
+    fn set(&mut self, k: usize, i: u32) {
+        if i > u32::from(u16::MAX) {
+            self.widen();
+        }
+        match self {
+            Indices::Narrow(v) => v[k] = i as u16,
+            Indices::Wide(v) => v[k] = i,
+        }
+    }
+
+    fn widen(&mut self) {
+        if let Indices::Narrow(v) = self {
+            *self = Indices::Wide(v.iter().map(|&i| u32::from(i)).collect());
+        }
+    }
+
+    /// Inserts each `(k, i)` of `new` (ascending `k`, positions among the
+    /// indices held) before the index at `k`.
+    fn insert_sorted(&mut self, new: &[(usize, u32)]) {
+        if new.iter().any(|&(_, i)| i > u32::from(u16::MAX)) {
+            self.widen();
+        }
+        fn merged<T: Copy>(old: &[T], new: impl Iterator<Item = (usize, T)>) -> Vec<T> {
+            let mut out = Vec::with_capacity(old.len() + new.size_hint().0);
+            let mut from = 0;
+            for (k, v) in new {
+                out.extend_from_slice(&old[from..k]);
+                out.push(v);
+                from = k;
+            }
+            out.extend_from_slice(&old[from..]);
+            out
+        }
+        match self {
+            Indices::Narrow(v) => {
+                *v = merged(v, new.iter().map(|&(k, i)| (k, i as u16)));
+            }
+            Indices::Wide(v) => *v = merged(v, new.iter().copied()),
+        }
     }
 }
 
@@ -213,8 +304,9 @@ fn adjust_row(row: &mut [u64], changes: &[(u32, Cost)], adjustments: &mut Adjust
         let k = rank(row, c);
         let bits = [saving.cpu.to_bits(), saving.gpu.to_bits()];
         if row[3 * (c as usize / 64) + 1] >> (c % 64) & 1 == 1 {
-            let old = adjustments.idx[k];
-            adjustments.idx[k] = adjustments.value_of(&mut made, old, bits, |v| v + saving);
+            let old = adjustments.idx.get(k);
+            let v = adjustments.value_of(&mut made, old, bits, |v| v + saving);
+            adjustments.idx.set(k, v);
         } else {
             new.push((
                 k,
@@ -226,16 +318,7 @@ fn adjust_row(row: &mut [u64], changes: &[(u32, Cost)], adjustments: &mut Adjust
         for &(c, _) in changes {
             row[3 * (c as usize / 64) + 1] |= 1 << (c % 64);
         }
-        let idx = &adjustments.idx;
-        let mut merged = Vec::with_capacity(idx.len() + new.len());
-        let mut from = 0;
-        for (k, v) in new {
-            merged.extend_from_slice(&idx[from..k]);
-            merged.push(v);
-            from = k;
-        }
-        merged.extend_from_slice(&idx[from..]);
-        adjustments.idx = merged;
+        adjustments.idx.insert_sorted(&new);
         let mut before = 0u64;
         for w in row.chunks_exact_mut(3) {
             w[2] = before;
@@ -257,4 +340,73 @@ pub(super) fn cell_word_mask(r: IdRange, w: usize) -> u64 {
         m &= u64::MAX >> (hi - r.end as usize);
     }
     m
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Indices read back what was set and inserted, across the widening
+    /// the first index above two bytes makes, and narrow again when
+    /// renumbered within two bytes.
+    #[test]
+    fn indices_keep_their_values_across_widths() {
+        let mut idx = Indices::from(vec![5, 7, 65_535]);
+        assert!(matches!(idx, Indices::Narrow(_)));
+        let mut want = vec![5u32, 7, 65_535];
+        idx.insert_sorted(&[(0, 1), (2, 9)]);
+        want.insert(0, 1);
+        want.insert(3, 9);
+        assert!(matches!(idx, Indices::Narrow(_)));
+        idx.set(1, 65_536);
+        want[1] = 65_536;
+        assert!(matches!(idx, Indices::Wide(_)));
+        idx.insert_sorted(&[(5, 70_000)]);
+        want.push(70_000);
+        assert_eq!((0..idx.len()).map(|k| idx.get(k)).collect::<Vec<_>>(), want);
+        let narrow = Indices::from(vec![0, 65_535]);
+        assert!(matches!(narrow, Indices::Narrow(_)));
+        let mut n2 = narrow.clone();
+        n2.insert_sorted(&[(1, 100_000)]);
+        assert_eq!(
+            (0..3).map(|k| n2.get(k)).collect::<Vec<_>>(),
+            [0, 100_000, 65_535]
+        );
+    }
+
+    /// A cluster with more than 65,536 distinct adjustments keeps each
+    /// (the indices widen) and compacts back to two bytes once most are
+    /// dropped.
+    #[test]
+    fn adjustments_past_two_bytes_of_values() {
+        let n = 70_000usize;
+        let mut a = Adjustments::default();
+        let mut made = None;
+        let new: Vec<(usize, u32)> = (0..n)
+            .map(|k| {
+                let c = Cost {
+                    cpu: k as f64,
+                    gpu: 0.0,
+                };
+                let bits = [c.cpu.to_bits(), 0];
+                // Inserted into none held: every position is 0.
+                (0, a.value_of(&mut made, NO_VALUE, bits, |_| c))
+            })
+            .collect();
+        a.idx.insert_sorted(&new);
+        assert!(matches!(a.idx, Indices::Wide(_)));
+        for k in [0, 1, 65_535, 65_536, n - 1] {
+            assert_eq!(a.get(k).cpu, k as f64);
+        }
+        // Every CPV given the same new value: the old ones are dropped.
+        let same = Cost { cpu: 1.5, gpu: 0.0 };
+        let v = a.value_of(&mut None, NO_VALUE, [1, 1], |_| same);
+        for k in 0..n {
+            a.idx.set(k, v);
+        }
+        a.compact();
+        assert_eq!(a.sizes(), (n, 1));
+        assert!(matches!(a.idx, Indices::Narrow(_)));
+        assert_eq!(a.get(n - 1).cpu, 1.5);
+    }
 }

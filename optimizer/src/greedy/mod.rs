@@ -506,8 +506,7 @@ impl<'a> State<'a> {
     /// Calls `f(cpv, effect)` for every CPV candidate `i` may serve in
     /// cells with CPVs above `t_max`.
     fn for_each_unsolved_effect(&self, i: u32, mut f: impl FnMut(u32, Effect)) {
-        let cand = &self.cands[i as usize];
-        for &g in &self.all.served[cand.served.indices()] {
+        for g in self.all.groups_served(i) {
             let gr = self.all.pairs.group(g);
             if self.unsolved_in_cell[gr.kd as usize] == 0 {
                 continue;
@@ -522,7 +521,8 @@ impl<'a> State<'a> {
         let cand = &self.cands[i as usize];
         let s = self.ctx.hierarchy.nodes[cand.node as usize].sphere;
         // All CPVs of a group share their region, hence the impostor's cost.
-        let imp = self.ctx.model.impostor(cand.spec.layers, s.radius, gr.dist);
+        let dist = self.all.pairs.dist(gr, s.center);
+        let imp = self.ctx.model.impostor(cand.spec.layers, s.radius, dist);
         self.all.pairs.for_each(gr, |c, orig| {
             if let Some(e) = self.effect(c, cand.node, orig, imp) {
                 f(c, e);
@@ -537,7 +537,7 @@ impl<'a> State<'a> {
         }
         // The effects, group by group in parallel (each CPV is in one
         // group), then in CPV order.
-        let served = &self.all.served[self.cands[i as usize].served.indices()];
+        let served: Vec<u32> = self.all.groups_served(i).collect();
         let mut changes: Vec<(u32, Cost, Cost)> = served
             .par_iter()
             .with_min_len(64)
@@ -618,9 +618,8 @@ impl<'a> State<'a> {
     /// `stamp`: a score computed then is still exact.
     fn unchanged_since(&self, i: u32, stamp: u64) -> bool {
         let all = self.all;
-        all.served[self.cands[i as usize].served.indices()]
-            .iter()
-            .all(|&g| self.cell_changed[all.pairs.group(g).kd as usize] <= stamp)
+        all.groups_served(i)
+            .all(|g| self.cell_changed[all.pairs.group(g).kd as usize] <= stamp)
     }
 }
 
@@ -1031,5 +1030,26 @@ mod tests {
             st.accept(best);
         }
         check(&st);
+    }
+
+    /// The served lists held four bytes an entry (as where a cluster has
+    /// more than 65,536 groups) select the same impostors, used in the
+    /// same CPVs, as the two-byte lists the small city gets.
+    #[test]
+    fn wide_served_lists_select_as_narrow_ones() {
+        with_small_city(|ctx, pv, cands| {
+            let job = synthetic_job(5, 5);
+            let wide = Candidates {
+                list: cands.list.clone(),
+                pairs: cands.pairs.clone(),
+                served: cands.served.widened(),
+            };
+            assert_eq!(wide.served.bytes(), 2 * cands.served.bytes());
+            let a = select_lazy(ctx, &job, pv, cands, &mut |_| true);
+            let b = select_lazy(ctx, &job, pv, &wide, &mut |_| true);
+            assert!(a.uses.iter().filter(|&&u| u > 0).count() > 3);
+            assert_eq!(a.uses, b.uses);
+            assert_eq!(a.cpv_impostors, b.cpv_impostors);
+        });
     }
 }

@@ -57,12 +57,15 @@ impl State<'_> {
     pub(super) fn add_gains(&self, node: u32, layers: u32, groups: Range<usize>, sum: &mut f64) {
         let all = self.all;
         let s = self.ctx.hierarchy.nodes[node as usize].sphere;
-        for &g in &all.served[groups] {
+        for g in all.served_range(node, groups) {
             let gr = all.pairs.group(g);
             if self.unsolved_in_cell[gr.kd as usize] == 0 {
                 continue;
             }
-            let imp = self.ctx.model.impostor(layers, s.radius, gr.dist);
+            let imp = self
+                .ctx
+                .model
+                .impostor(layers, s.radius, all.pairs.dist(gr, s.center));
             all.pairs.for_each(gr, |c, orig| {
                 let excess = self.excess[c as usize];
                 if excess > 0.0 {
@@ -100,9 +103,10 @@ impl State<'_> {
         let mut sums = vec![0.0f64; layers.len()];
         let mut out = Vec::with_capacity(cands.len());
         let mut pos = cands[0].served.start as usize;
+        let node = cands[0].node;
         for (k, c) in cands.iter().enumerate() {
             let end = c.served.end as usize;
-            for &g in &self.all.served[pos..end] {
+            for g in self.all.served_range(node, pos..end) {
                 add(g, self.all.pairs.group(g), &layers, &active, &mut sums);
             }
             pos = end;
@@ -119,7 +123,8 @@ impl State<'_> {
     /// mode, whose bounds do not use it).
     pub(super) fn score_block(&self, block: IdRange) -> (Vec<f64>, Vec<(u32, Walked)>) {
         let node = self.cands[block.start as usize].node;
-        let r = self.ctx.hierarchy.nodes[node as usize].sphere.radius;
+        let s = self.ctx.hierarchy.nodes[node as usize].sphere;
+        let r = s.radius;
         let m = &self.ctx.model;
         let adds = m.time_saved(Cost::default()).is_some();
         let mut imps: Vec<Cost> = Vec::new();
@@ -138,7 +143,7 @@ impl State<'_> {
                 return;
             }
             let (mut most, mut gain) = (0.0f64, 0.0f64);
-            let px = self.ctx.model.pixels(r, gr.dist);
+            let px = self.ctx.model.pixels(r, self.all.pairs.dist(gr, s.center));
             // The cheapest impostor of the cluster here, for `gain`.
             let least = m.impostor_covering(1, px);
             imps.clear();
@@ -217,7 +222,8 @@ impl State<'_> {
     /// rounding.
     pub(super) fn bound_block(&self, block: IdRange) -> Vec<f64> {
         let node = self.cands[block.start as usize].node;
-        let r = self.ctx.hierarchy.nodes[node as usize].sphere.radius;
+        let s = self.ctx.hierarchy.nodes[node as usize].sphere;
+        let r = s.radius;
         let m = &self.ctx.model;
         let sums = self.walk_block(block, |g, gr, layers, active, sums| {
             let n = self.open_in_cell(node, gr.kd);
@@ -235,7 +241,7 @@ impl State<'_> {
             let whole = whole.min(f64::from(walked.rep));
             let e = e.min(f64::from(walked.gain));
             let n = f64::from(gr.len.min(n));
-            let px = m.pixels(r, gr.dist);
+            let px = m.pixels(r, self.all.pairs.dist(gr, s.center));
             for &l in active {
                 let imp = m
                     .time_saved(m.impostor_covering(layers[l], px))

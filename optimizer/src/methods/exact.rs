@@ -95,11 +95,12 @@ impl Instance {
             if !allowed(i) {
                 continue;
             }
-            let r = h.nodes[cand.node as usize].sphere.radius;
+            let s = h.nodes[cand.node as usize].sphere;
+            let r = s.radius;
             let mut list = Vec::new();
-            for &g in &cands.served[cand.served.indices()] {
+            for g in cands.groups_served(i) {
                 let gr = cands.pairs.group(g);
-                let imp = m.impostor(cand.spec.layers, r, gr.dist);
+                let imp = m.impostor(cand.spec.layers, r, cands.pairs.dist(gr, s.center));
                 for (c, orig) in cands.pairs.iter(gr) {
                     if !limit[c as usize].is_finite() {
                         continue;
@@ -637,8 +638,9 @@ pub fn select(
     let listed: u64 = cands
         .list
         .iter()
-        .flat_map(|c| &cands.served[c.served.indices()])
-        .map(|&g| u64::from(cands.pairs.group(g).len))
+        .zip(0..)
+        .flat_map(|(_, i)| cands.groups_served(i))
+        .map(|g| u64::from(cands.pairs.group(g).len))
         .sum();
     let cap = job.exact.max_variables;
     if listed > cap.saturating_mul(EARLY_REFUSAL) {

@@ -474,14 +474,15 @@ pub const GREEDY_BYTES_PER_PAIR: u64 = 4;
 pub const BYTES_PER_STORED: u64 = 16;
 
 /// Bytes a run holds per group (one cluster's pairs in one cell), besides
-/// its served-list entries: the group itself (48 bytes), what the greedy's
+/// its served-list entries: the group itself (40 bytes), what the greedy's
 /// exact scorings found in it (8 bytes) and the allocator's slack.
-pub const BYTES_PER_GROUP: u64 = 64;
+pub const BYTES_PER_GROUP: u64 = 56;
 
-/// Bytes per entry of the candidates' served lists: the group id (4
-/// bytes) and its share of the candidates (about 130 bytes each; 1–13
-/// candidates per 100 entries measured) and the greedy's heap.
-pub const BYTES_PER_SERVED: u64 = 12;
+/// Bytes per entry of the candidates' served lists besides the entry
+/// itself (2 bytes, 4 where a cluster has more than 65,536 groups; see
+/// [`candidates::Served`]): its share of the candidates (about 130 bytes
+/// each; 1–13 candidates per 100 entries measured) and the greedy's heap.
+pub const BYTES_PER_SERVED: u64 = 8;
 
 /// The peak memory a placement of `pv` is predicted to need: what the
 /// process holds now, the pairs and groups its CPVs list, the served lists
@@ -497,9 +498,20 @@ pub fn predicted_peak_bytes(ctx: &Context, job: &Job, pv: &ProblemViews) -> u64 
         + t.bit_words * BYTES_PER_BIT_WORD
         + t.partial * BYTES_PER_STORED
         + t.cells * BYTES_PER_GROUP
-        + served * BYTES_PER_SERVED
+        + served * (BYTES_PER_SERVED + served_entry_bytes(pv))
         + pv.cpvs.len() as u64 * 256
         + greedy::marks_bytes(pv.cpvs.len(), pv.node_counts.len())
+}
+
+/// Bytes of one served-list entry: two where no cluster is listed in more
+/// than [`candidates::NARROW_GROUPS`] cells (its groups), else four.
+fn served_entry_bytes(pv: &ProblemViews) -> u64 {
+    let widest = pv.node_counts.iter().map(|c| c.cells).max().unwrap_or(0);
+    if widest <= candidates::NARROW_GROUPS {
+        2
+    } else {
+        4
+    }
 }
 
 /// Gives the heap freed memory back to the system: glibc keeps freed
