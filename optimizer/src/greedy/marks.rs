@@ -79,16 +79,29 @@ impl Adjustments {
         }
         let mut map = vec![NO_VALUE; self.values.len()];
         let mut kept = Vec::new();
-        let mut renumbered = Vec::with_capacity(self.idx.len());
-        for k in 0..self.idx.len() {
-            let i = self.idx.get(k) as usize;
-            if map[i] == NO_VALUE {
-                map[i] = kept.len() as u32;
-                kept.push(self.values[i]);
+        let values = &self.values;
+        let mut renumber = |i: u32| {
+            let m = &mut map[i as usize];
+            if *m == NO_VALUE {
+                *m = kept.len() as u32;
+                kept.push(values[i as usize]);
             }
-            renumbered.push(map[i]);
+            *m
+        };
+        // In place, at the indices' own width: narrow indices keep
+        // fitting (no more values are kept than they referred to); wide
+        // ones narrow where every kept value fits.
+        match &mut self.idx {
+            Indices::Narrow(v) => v
+                .iter_mut()
+                .for_each(|x| *x = renumber(u32::from(*x)) as u16),
+            Indices::Wide(v) => v.iter_mut().for_each(|x| *x = renumber(*x)),
         }
-        self.idx = Indices::from(renumbered);
+        if let Indices::Wide(v) = &self.idx
+            && kept.len() <= 1 << 16
+        {
+            self.idx = Indices::Narrow(v.iter().map(|&i| i as u16).collect());
+        }
         self.kept = kept.len();
         self.values = kept;
     }
@@ -116,6 +129,7 @@ impl Default for Indices {
     }
 }
 
+#[cfg(test)]
 impl From<Vec<u32>> for Indices {
     /// Narrow when every index fits in two bytes.
     fn from(v: Vec<u32>) -> Self {
@@ -136,6 +150,7 @@ impl Indices {
         }
     }
 
+    #[cfg(test)]
     fn len(&self) -> usize {
         match self {
             Indices::Narrow(v) => v.len(),

@@ -635,11 +635,8 @@ pub fn select(
         .collect();
     // The pairs before dominance bound the program's size: far above the
     // limit, it is refused before the pairs are listed.
-    let listed: u64 = cands
-        .list
-        .iter()
-        .zip(0..)
-        .flat_map(|(_, i)| cands.groups_served(i))
+    let listed: u64 = (0..cands.list.len() as u32)
+        .flat_map(|i| cands.groups_served(i))
         .map(|g| u64::from(cands.pairs.group(g).len))
         .sum();
     let cap = job.exact.max_variables;
