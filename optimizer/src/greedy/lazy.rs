@@ -276,9 +276,9 @@ pub(crate) fn select_lazy_with(
             compact_at = compact_at.max(2 * heap.len());
         }
     }
-    st.sel.drop_replaced(&st.lineage);
     if !ctx.cancelled() {
         st.sel.reasons = st.explain_unsolved(job);
     }
-    st.sel
+    drop((heap, latest, stale));
+    st.into_selection()
 }

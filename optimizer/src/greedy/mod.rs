@@ -39,6 +39,7 @@ use crate::views::{Context, Cpv, ProblemViews};
 
 mod explain;
 mod lazy;
+mod log;
 mod marks;
 mod partial;
 mod score;
@@ -47,6 +48,7 @@ use lazy::blocks;
 #[cfg(test)]
 pub(crate) use lazy::select_lazy_with;
 pub use lazy::{LAZY_BATCH, select_lazy, select_lazy_giving_up};
+use log::AcceptLog;
 pub use marks::marks_bytes;
 use marks::{Adjustments, Mark, NodeMarks, cell_word_mask};
 pub use partial::{drop_partial, reselect_solvable};
@@ -241,10 +243,10 @@ struct State<'a> {
     /// serves, so a key computed after choice `v` is still exact while no
     /// cell it serves changed after `v`.
     cell_changed: Vec<u64>,
-    /// Per hierarchy node, scratch marks for dropping replaced impostors
-    /// from a full list (see [`Lineage::drop_replaced`]), and the last stamp.
-    seen: Vec<u32>,
-    stamp: u32,
+    /// What each accept changed: the CPVs' impostor lists are made from it
+    /// when the greedy ends ([`State::into_selection`]; `sel.cpv_impostors`
+    /// stays empty until then).
+    log: AcceptLog,
     /// Each cluster's nearest ancestor with candidates: the chain an
     /// accept adjusts, and what finds replaced impostors.
     lineage: Lineage,
@@ -344,8 +346,7 @@ impl<'a> State<'a> {
                 v
             },
             cell_changed: vec![0; pv.kd.len()],
-            seen: vec![u32::MAX; ctx.hierarchy.nodes.len()],
-            stamp: 0,
+            log: AcceptLog::default(),
             excess: pv
                 .cpvs
                 .iter()
@@ -572,30 +573,13 @@ impl<'a> State<'a> {
             .adjust_all(&chain, &savings, &mut self.adjustments);
         self.marks
             .cover_all(node, end, changes.iter().map(|&(c, _, _)| c));
-        // The impostors this one replaces stay in the CPVs' lists until a
-        // list is full or the greedy ends (`Selection::drop_replaced`):
-        // nothing reads the lists before, and a list is long where the
-        // view reaches far.
+        // The CPVs' lists are made when the greedy ends: nothing reads them
+        // before.
+        self.log.push(i, changes.iter().map(|&(c, _, _)| c));
         let mut changed_cells: Vec<u32> = Vec::new();
         for (c, cost, _) in changes {
             let cu = c as usize;
             let cpv = &self.pv.cpvs[cu];
-            let list = &mut self.sel.cpv_impostors[cu];
-            if list.len() == list.capacity() && !list.is_empty() {
-                // Full: what is replaced goes before the list grows.
-                self.stamp = self.stamp.wrapping_add(1);
-                if self.stamp == u32::MAX {
-                    self.seen.iter_mut().for_each(|s| *s = u32::MAX);
-                    self.stamp = 0;
-                }
-                self.lineage.drop_replaced(list, &mut self.seen, self.stamp);
-                // At least half the list free before the next look, so
-                // each entry is looked at a bounded number of times.
-                if list.len() > list.capacity() / 2 {
-                    list.reserve(list.len());
-                }
-            }
-            list.push(i);
             let excess = self.ctx.model.frame_time(cost) - self.target(c);
             if self.excess[cu] > 0.0 && excess <= 0.0 {
                 self.unsolved_in_cell[cpv.kd as usize] -= 1;
@@ -612,6 +596,28 @@ impl<'a> State<'a> {
             self.cell_excess[kd as usize] = self.excess_in_cell(kd as usize);
         }
         self.sel.accepted += 1;
+    }
+
+    /// The selection, its CPVs' impostor lists made from the log once the
+    /// scoring state (adjustments, marks, what exact scorings found) is
+    /// dropped, so the lists and that state are never held at once, and
+    /// the replaced impostors dropped.
+    fn into_selection(self) -> Selection {
+        let State {
+            log,
+            lineage,
+            mut sel,
+            pv,
+            adjustments,
+            marks,
+            walked,
+            ..
+        } = self;
+        drop((adjustments, marks, walked));
+        sel.cpv_impostors = log.lists(pv.cpvs.len(), &lineage);
+        drop(log);
+        sel.drop_replaced(&lineage);
+        sel
     }
 
     /// True when no cell candidate `i` serves changed after choice
@@ -649,9 +655,8 @@ pub fn select_naive(ctx: &Context, job: &Job, pv: &ProblemViews, cands: &Candida
             None => break,
         }
     }
-    st.sel.drop_replaced(&st.lineage);
     st.sel.reasons = st.explain_unsolved(job);
-    st.sel
+    st.into_selection()
 }
 
 /// Removes impostors that are not needed to keep every CPV within `t_max`,
@@ -844,6 +849,7 @@ mod tests {
                 };
                 st.accept(best.id);
             }
+            st.sel.cpv_impostors = st.log.lists(pv.cpvs.len(), &st.lineage);
             let before: usize = st.sel.cpv_impostors.iter().map(Vec::len).sum();
             st.sel.drop_replaced(&st.lineage);
             replaced += before - st.sel.cpv_impostors.iter().map(Vec::len).sum::<usize>();
