@@ -2,9 +2,10 @@
 //! impostor lists are made from it once the greedy's scoring state is gone.
 
 use super::Lineage;
+use crate::math::gaps;
 
 /// Per accept, in order: the candidate and the CPVs it made faster
-/// (ascending), as gaps in LEB128 bytes. CPVs that gain from an accept lie
+/// (ascending), as gaps in LEB128 bytes ([`gaps`]). CPVs that gain from an accept lie
 /// in a few cells, whose CPVs are numbered together, so most gaps take one
 /// byte: a fraction of the four bytes (and the room for growth) per entry
 /// that per-CPV lists take.
@@ -19,21 +20,7 @@ impl AcceptLog {
     /// Records that candidate `cand` was accepted and made `cpvs`
     /// (ascending) faster.
     pub(super) fn push(&mut self, cand: u32, cpvs: impl IntoIterator<Item = u32>) {
-        let mut last = 0u32;
-        for c in cpvs {
-            debug_assert!(c >= last, "CPVs in ascending order");
-            let mut gap = c - last;
-            last = c;
-            loop {
-                let byte = (gap & 0x7f) as u8;
-                gap >>= 7;
-                if gap == 0 {
-                    self.bytes.push(byte);
-                    break;
-                }
-                self.bytes.push(byte | 0x80);
-            }
-        }
+        gaps::push(&mut self.bytes, cpvs);
         self.accepts.push((cand, self.bytes.len() as u64));
     }
 
@@ -51,20 +38,7 @@ impl AcceptLog {
         let mut start = 0usize;
         for &(cand, end) in &self.accepts {
             let end = end as usize;
-            let mut c = 0u32;
-            let mut at = start;
-            while at < end {
-                let (mut gap, mut shift) = (0u32, 0);
-                loop {
-                    let byte = self.bytes[at];
-                    at += 1;
-                    gap |= u32::from(byte & 0x7f) << shift;
-                    shift += 7;
-                    if byte & 0x80 == 0 {
-                        break;
-                    }
-                }
-                c += gap;
+            for c in gaps::read(&self.bytes[start..end]) {
                 let list = &mut lists[c as usize];
                 if list.len() == list.capacity() && !list.is_empty() {
                     stamp = stamp.wrapping_add(1);

@@ -3,6 +3,7 @@
 //! view, and the seeded random number generator.
 
 pub mod enclosing;
+pub mod gaps;
 pub mod geom;
 pub mod grid;
 pub mod rng;

@@ -13,6 +13,7 @@ use crate::api::placement::{Placement, Summary};
 use crate::api::stats::{StageTime, Stats, TileStats};
 use crate::control::{Control, Event, Observer};
 use crate::input::Prepared;
+use crate::math::gaps;
 use crate::place::{PlaceOptions, PlaceOutput};
 use crate::views::ProblemViews;
 use crate::{Error, Result};
@@ -123,7 +124,7 @@ impl Prepared<'_> {
 
 /// A placement whose CPVs' impostor lists are packed into one buffer, each
 /// sorted and written as the gaps between its ids, seven bits a byte
-/// (LEB128): about a byte an id where a CPV draws many of the tile's
+/// (LEB128, [`gaps`]): about a byte an id where a CPV draws many of the tile's
 /// impostors, instead of four. [`merge`] sorts the lists anyway.
 struct Packed {
     /// The placement with every CPV's list emptied.
@@ -140,16 +141,7 @@ impl Packed {
         for c in &mut placement.cpvs {
             let mut ids = std::mem::take(&mut c.impostors);
             ids.sort_unstable();
-            let mut last = 0u32;
-            for id in ids {
-                let mut gap = id - last;
-                last = id;
-                while gap >= 0x80 {
-                    lists.push((gap & 0x7f) as u8 | 0x80);
-                    gap >>= 7;
-                }
-                lists.push(gap as u8);
-            }
+            gaps::push(&mut lists, ids);
             ends.push(lists.len());
         }
         lists.shrink_to_fit();
@@ -168,17 +160,7 @@ impl Packed {
         } = self;
         let mut start = 0;
         for (c, end) in placement.cpvs.iter_mut().zip(ends) {
-            let (mut last, mut gap, mut shift) = (0u32, 0u32, 0);
-            for &b in &lists[start..end] {
-                gap |= u32::from(b & 0x7f) << shift;
-                if b & 0x80 != 0 {
-                    shift += 7;
-                } else {
-                    last += gap;
-                    c.impostors.push(last);
-                    (gap, shift) = (0, 0);
-                }
-            }
+            c.impostors.extend(gaps::read(&lists[start..end]));
             start = end;
         }
         placement
