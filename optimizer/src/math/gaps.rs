@@ -66,5 +66,11 @@ mod tests {
         assert_eq!(buf.len(), 1 + 1 + 1 + 2 + 1 + 3 + 5);
         assert_eq!(read(&buf).collect::<Vec<_>>(), ids);
         assert_eq!(read(&[]).count(), 0);
+        // Gaps of exactly 128 and 2¹⁴ take a byte more than one below.
+        let edges = [128u32, 256, 256 + (1 << 14)];
+        let mut buf = Vec::new();
+        push(&mut buf, edges);
+        assert_eq!(buf.len(), 2 + 2 + 3);
+        assert_eq!(read(&buf).collect::<Vec<_>>(), edges);
     }
 }
