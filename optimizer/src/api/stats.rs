@@ -50,8 +50,9 @@ pub struct Stats {
     /// their group.
     #[serde(default)]
     pub explicit_pairs: u64,
-    /// Of the explicit pairs, those that store their own cost; the others
-    /// take the cluster's whole cost in the cell, held once per group.
+    /// Costs stored for explicit pairs: those of the pairs whose cost is
+    /// not the cluster's whole cost in the cell (held once per group), each
+    /// once for a run of a group's CPVs that hold the same.
     #[serde(default)]
     pub stored_pair_costs: u64,
     /// Groups: one cluster's pairs in one cell.

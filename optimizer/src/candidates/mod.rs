@@ -80,7 +80,7 @@ impl Candidates {
     /// the CPV's enclosing set.
     pub fn for_each_served(&self, i: u32, mut f: impl FnMut(u32, Cost)) {
         for g in self.groups_served(i) {
-            for (c, cost) in self.pairs.iter(self.pairs.group(g)) {
+            for (c, cost) in self.pairs.iter(&self.pairs.group(g)) {
                 f(c, cost);
             }
         }
@@ -244,7 +244,7 @@ pub fn generate(ctx: &Context, job: &Job, pv: &ProblemViews) -> Candidates {
             // distinct corner once (neighbouring cells share corners, which
             // the grid computes bit for bit alike), and each group's eight.
             let (corner_dirs, corner_ids) = distinct_corners(
-                (g0..g1).map(|g| pv.cpvs[pairs.first_cpv(pairs.group(g)) as usize].region),
+                (g0..g1).map(|g| pv.cpvs[pairs.first_cpv(&pairs.group(g)) as usize].region),
                 sphere.center,
             );
             let mut seen = vec![u32::MAX; corner_dirs.len()];
@@ -256,7 +256,7 @@ pub fn generate(ctx: &Context, job: &Job, pv: &ProblemViews) -> Candidates {
             let mut grid_specs: Vec<Option<Option<ImpostorSpec>>> =
                 vec![None; alphas.len() * (last_k as usize + 1)];
             for g in g0..g1 {
-                let gr = pairs.group(g);
+                let gr = &pairs.group(g);
                 let first = &pv.cpvs[pairs.first_cpv(gr) as usize];
                 let region = first.region;
                 let dist = pairs.dist(gr, sphere.center);
@@ -408,7 +408,7 @@ pub fn generate(ctx: &Context, job: &Job, pv: &ProblemViews) -> Candidates {
                             // cells are served, at the resolution and layer
                             // count their distance needs.
                             for &(_, g) in &tuples[s..t] {
-                                nearest = nearest.min(pairs.dist(pairs.group(g), sphere.center));
+                                nearest = nearest.min(pairs.dist(&pairs.group(g), sphere.center));
                             }
                             let d = ladder_distance(size, k, steps).max(nearest);
                             // Likewise it narrows to the smallest cone

@@ -65,7 +65,7 @@ impl State<'_> {
                 let sphere = h.nodes[l as usize].sphere;
                 let mut out = Vec::new();
                 for g in all.pairs.groups_of(l).indices() {
-                    let gr = all.pairs.group(g as u32);
+                    let gr = &all.pairs.group(g as u32);
                     if self.unsolved_in_cell[gr.kd as usize] == 0 {
                         continue;
                     }

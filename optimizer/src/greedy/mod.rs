@@ -508,7 +508,7 @@ impl<'a> State<'a> {
     /// cells with CPVs above `t_max`.
     fn for_each_unsolved_effect(&self, i: u32, mut f: impl FnMut(u32, Effect)) {
         for g in self.all.groups_served(i) {
-            let gr = self.all.pairs.group(g);
+            let gr = &self.all.pairs.group(g);
             if self.unsolved_in_cell[gr.kd as usize] == 0 {
                 continue;
             }
@@ -544,7 +544,7 @@ impl<'a> State<'a> {
             .with_min_len(64)
             .flat_map_iter(|&g| {
                 let mut out = Vec::new();
-                self.group_effects(i, self.all.pairs.group(g), &mut |c, e: Effect| {
+                self.group_effects(i, &self.all.pairs.group(g), &mut |c, e: Effect| {
                     if e.accelerates {
                         out.push((c, e.new_cost, e.saving));
                     }
@@ -625,7 +625,7 @@ impl<'a> State<'a> {
     fn unchanged_since(&self, i: u32, stamp: u64) -> bool {
         let all = self.all;
         all.groups_served(i)
-            .all(|g| self.cell_changed[all.pairs.group(g).kd as usize] <= stamp)
+            .all(|g| self.cell_changed[all.pairs.kd(g) as usize] <= stamp)
     }
 }
 
@@ -881,7 +881,7 @@ mod tests {
         let (mut covered, mut adjusted) = (0, 0);
         for &n in &nodes {
             for g in cands.pairs.groups_of(n).indices() {
-                let gr = cands.pairs.group(g as u32);
+                let gr = &cands.pairs.group(g as u32);
                 for (c, orig) in cands.pairs.iter(gr) {
                     let placed = &st.sel.cpv_impostors[c as usize];
                     let rep = st.representation(c, n, orig);

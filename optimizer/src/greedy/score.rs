@@ -58,7 +58,7 @@ impl State<'_> {
         let all = self.all;
         let s = self.ctx.hierarchy.nodes[node as usize].sphere;
         for g in all.served_range(node, groups) {
-            let gr = all.pairs.group(g);
+            let gr = &all.pairs.group(g);
             if self.unsolved_in_cell[gr.kd as usize] == 0 {
                 continue;
             }
@@ -107,7 +107,7 @@ impl State<'_> {
         for (k, c) in cands.iter().enumerate() {
             let end = c.served.end as usize;
             for g in self.all.served_range(node, pos..end) {
-                add(g, self.all.pairs.group(g), &layers, &active, &mut sums);
+                add(g, &self.all.pairs.group(g), &layers, &active, &mut sums);
             }
             pos = end;
             out.push(sums[idx[k]]);
@@ -240,7 +240,7 @@ impl State<'_> {
             let walked = self.walked[g as usize];
             let whole = whole.min(f64::from(walked.rep));
             let e = e.min(f64::from(walked.gain));
-            let n = f64::from(gr.len.min(n));
+            let n = f64::from(gr.len(&self.all.pairs).min(n));
             let px = m.pixels(r, self.all.pairs.dist(gr, s.center));
             for &l in active {
                 let imp = m

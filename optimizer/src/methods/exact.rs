@@ -99,7 +99,7 @@ impl Instance {
             let r = s.radius;
             let mut list = Vec::new();
             for g in cands.groups_served(i) {
-                let gr = cands.pairs.group(g);
+                let gr = &cands.pairs.group(g);
                 let imp = m.impostor(cand.spec.layers, r, cands.pairs.dist(gr, s.center));
                 for (c, orig) in cands.pairs.iter(gr) {
                     if !limit[c as usize].is_finite() {
@@ -637,7 +637,7 @@ pub fn select(
     // limit, it is refused before the pairs are listed.
     let listed: u64 = (0..cands.list.len() as u32)
         .flat_map(|i| cands.groups_served(i))
-        .map(|g| u64::from(cands.pairs.group(g).len))
+        .map(|g| u64::from(cands.pairs.group(g).len(&cands.pairs)))
         .sum();
     let cap = job.exact.max_variables;
     if listed > cap.saturating_mul(EARLY_REFUSAL) {

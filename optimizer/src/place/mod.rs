@@ -475,9 +475,9 @@ pub const GREEDY_BYTES_PER_PAIR: u64 = 3;
 pub const BYTES_PER_STORED: u64 = 16;
 
 /// Bytes a run holds per group (one cluster's pairs in one cell), besides
-/// its served-list entries: the group itself (40 bytes), what the greedy's
+/// its served-list entries: the group itself (32 bytes), what the greedy's
 /// exact scorings found in it (8 bytes) and the allocator's slack.
-pub const BYTES_PER_GROUP: u64 = 56;
+pub const BYTES_PER_GROUP: u64 = 48;
 
 /// Bytes per entry of the candidates' served lists besides the entry
 /// itself (2 bytes, 4 where a cluster has more than 65,536 groups; see
