@@ -45,19 +45,49 @@ use shaft::{
     min_cos,
 };
 
-/// One impostor candidate.
+/// One impostor candidate. Its view cell is held in what the cluster and
+/// the view space hierarchy do not give (see [`Candidate::cell`]): there
+/// are millions of candidates on the large cities.
 #[derive(Clone, Debug)]
 pub struct Candidate {
     /// The cluster (hierarchy node id).
     pub node: u32,
-    /// The view cell.
-    pub cell: ViewCell,
-    /// For box cells, the kd node of the 3D view space hierarchy; else `u32::MAX`.
+    /// For box cells, the kd node of the 3D view space hierarchy (the box
+    /// is its bounds); else `u32::MAX`.
     pub kd: u32,
+    /// For shaft cells, the shaft but for its apex, the cluster's centre.
+    shaft: Shaft,
     /// Layers, resolution, memory.
     pub spec: ImpostorSpec,
     /// The groups it serves: `Candidates::served[served.start..served.end]`.
     pub served: IdRange,
+}
+
+/// A shaft view cell but for its apex (see [`ViewCell::Shaft`]).
+#[derive(Clone, Copy, Debug, Default)]
+struct Shaft {
+    axis: DVec3,
+    half_angle: f64,
+    min_distance: f64,
+}
+
+const _: () = assert!(std::mem::size_of::<Candidate>() == 72);
+
+impl Candidate {
+    /// Its view cell: a shaft from the centre of its cluster's sphere in
+    /// `h`, or the bounds of its kd node in `pv`.
+    pub fn cell(&self, h: &crate::scene::hierarchy::Hierarchy, pv: &ProblemViews) -> ViewCell {
+        if self.kd == u32::MAX {
+            ViewCell::Shaft {
+                apex: h.nodes[self.node as usize].sphere.center,
+                axis: self.shaft.axis,
+                half_angle: self.shaft.half_angle,
+                min_distance: self.shaft.min_distance,
+            }
+        } else {
+            ViewCell::Box(pv.kd[self.kd as usize].aabb)
+        }
+    }
 }
 
 /// The generated candidates, ordered by (node, key): ids are indices, and
@@ -434,8 +464,7 @@ pub fn generate(ctx: &Context, job: &Job, pv: &ProblemViews) -> Candidates {
                             let alpha = alpha.min(widest * (1.0 + 1e-9) + 1e-12);
                             imodel.shaft(&sphere, alpha, d).map(|spec| Candidate {
                                 node: n,
-                                cell: ViewCell::Shaft {
-                                    apex: sphere.center,
+                                shaft: Shaft {
                                     axis,
                                     half_angle: alpha,
                                     min_distance: d,
@@ -449,7 +478,7 @@ pub fn generate(ctx: &Context, job: &Job, pv: &ProblemViews) -> Candidates {
                             let aabb: Aabb = pv.kd[kd as usize].aabb;
                             imodel.boxed(&sphere, &aabb).map(|spec| Candidate {
                                 node: n,
-                                cell: ViewCell::Box(aabb),
+                                shaft: Shaft::default(),
                                 kd,
                                 spec,
                                 served: IdRange::new(start, served_end),
@@ -475,6 +504,8 @@ pub fn generate(ctx: &Context, job: &Job, pv: &ProblemViews) -> Candidates {
                 }
                 i = e;
             }
+            // Held until every cluster's are made: no room to spare.
+            cands.shrink_to_fit();
             (cands, served)
         })
         .collect();

@@ -33,8 +33,9 @@ pub fn build_placement(
             let node = &h.nodes[c.node as usize];
             let mut objects = h.objects(c.node).to_vec();
             objects.sort_unstable();
-            let view_cell = ViewCellJson::from(&c.cell);
-            let d = c.cell.closest_distance(node.sphere.center);
+            let cell = c.cell(h, pv);
+            let view_cell = ViewCellJson::from(&cell);
+            let d = cell.closest_distance(node.sphere.center);
             let cost = ctx.model.impostor(c.spec.layers, node.sphere.radius, d);
             PlacedImpostor {
                 id: k as u32,

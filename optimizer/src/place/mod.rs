@@ -896,7 +896,8 @@ mod tests {
             cands.for_each_served(i as u32, |cpv, cost| {
                 assert_eq!(cands.pairs.cost_of(c.node, cpv), Some(cost));
                 let cpv = &pv.cpvs[cpv as usize];
-                assert!(c.cell.contains_box(&cpv.region), "{c:?} {:?}", cpv.region);
+                let cell = c.cell(&h, &pv);
+                assert!(cell.contains_box(&cpv.region), "{cell:?} {:?}", cpv.region);
                 checked += 1;
             });
         }
