@@ -32,6 +32,7 @@ use crate::math::IdRange;
 use crate::math::geom::Aabb;
 use crate::model::cost::Cost;
 use crate::model::impostor::{ImpostorModel, ImpostorSpec, ViewCell};
+use crate::scene::hierarchy::Hierarchy;
 use crate::views::{Context, ProblemViews};
 
 mod pairs;
@@ -76,7 +77,7 @@ const _: () = assert!(std::mem::size_of::<Candidate>() == 72);
 impl Candidate {
     /// Its view cell: a shaft from the centre of its cluster's sphere in
     /// `h`, or the bounds of its kd node in `pv`.
-    pub fn cell(&self, h: &crate::scene::hierarchy::Hierarchy, pv: &ProblemViews) -> ViewCell {
+    pub fn cell(&self, h: &Hierarchy, pv: &ProblemViews) -> ViewCell {
         if self.kd == u32::MAX {
             ViewCell::Shaft {
                 apex: h.nodes[self.node as usize].sphere.center,
@@ -504,7 +505,8 @@ pub fn generate(ctx: &Context, job: &Job, pv: &ProblemViews) -> Candidates {
                 }
                 i = e;
             }
-            // Held until every cluster's are made: no room to spare.
+            // Each cluster's list is kept until all are joined: without
+            // the room its doubling left.
             cands.shrink_to_fit();
             (cands, served)
         })
