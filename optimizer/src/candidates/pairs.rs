@@ -33,6 +33,50 @@ const STORED: u32 = 1 << 31;
 const REPEAT: u32 = 1 << 30;
 /// The CPV id of an explicit pair.
 const ID: u32 = REPEAT - 1;
+
+/// A pair's cost as held: each time rounded down to an `f32` (half the
+/// memory of a [`Cost`]; a relative step below 6e-8). A cost that is too
+/// low keeps the greedy conservative: what a CPV's frame time loses when a
+/// cluster's objects give way to an impostor is at most their true cost,
+/// so the time it then counts is at least the true one. A cost stored for
+/// part of a cluster is held at most at the cluster's whole cost, as the
+/// greedy's bounds need, whatever the order of their sums left.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+struct Cost32 {
+    cpu: f32,
+    gpu: f32,
+}
+
+/// The greatest `f32` not above `x` (0 or more).
+fn f32_down(x: f64) -> f32 {
+    let f = x as f32;
+    if f64::from(f) > x { f.next_down() } else { f }
+}
+
+impl Cost32 {
+    fn down(c: Cost) -> Cost32 {
+        Cost32 {
+            cpu: f32_down(c.cpu),
+            gpu: f32_down(c.gpu),
+        }
+    }
+
+    /// The least of `self` and `o`, time by time.
+    fn min(self, o: Cost32) -> Cost32 {
+        Cost32 {
+            cpu: self.cpu.min(o.cpu),
+            gpu: self.gpu.min(o.gpu),
+        }
+    }
+
+    #[inline]
+    fn get(self) -> Cost {
+        Cost {
+            cpu: f64::from(self.cpu),
+            gpu: f64::from(self.gpu),
+        }
+    }
+}
 /// No CPV (the first CPV of a group with no pairs).
 const NONE: u32 = u32::MAX;
 
@@ -73,10 +117,10 @@ struct Rec {
     stored: u32,
     bits: u32,
     kd: u32,
-    whole: Cost,
+    whole: Cost32,
 }
 
-const _: () = assert!(std::mem::size_of::<Rec>() == 32);
+const _: () = assert!(std::mem::size_of::<Rec>() == 24);
 
 /// The pairs of every CPV, grouped by cluster (node id) and, within a
 /// cluster, by cell, CPV ids ascending.
@@ -87,7 +131,7 @@ pub struct Pairs {
     /// stored.
     explicit: Vec<u32>,
     /// The stored costs, in explicit pair order.
-    stored: Vec<Cost>,
+    stored: Vec<Cost32>,
     /// The groups' CPV sets below cut nodes, cell by cell, each distinct
     /// set of a cell once: the clusters below one cut node share theirs
     /// (a twentieth of the groups' sets are distinct on the city).
@@ -150,7 +194,7 @@ impl Iterator for PairIter<'_> {
             self.next += 1;
             if x & STORED != 0 {
                 if x & REPEAT == 0 {
-                    self.last = p.stored[self.stored];
+                    self.last = p.stored[self.stored].get();
                     self.stored += 1;
                 }
                 return Some((c, self.last));
@@ -201,7 +245,7 @@ impl Pairs {
             bits: a.bits,
             kd: a.kd,
             stored: a.stored,
-            whole: a.whole,
+            whole: a.whole.get(),
         }
     }
 
@@ -278,7 +322,7 @@ impl Pairs {
                     let x = self.explicit[next];
                     if x & STORED != 0 {
                         if x & REPEAT == 0 {
-                            last = self.stored[k];
+                            last = self.stored[k].get();
                             k += 1;
                         }
                         cost = last;
@@ -333,7 +377,7 @@ impl Pairs {
                 .iter()
                 .filter(|&&x| x & (STORED | REPEAT) == STORED)
                 .count();
-            return Some(self.stored[g.stored as usize + upto - 1]);
+            return Some(self.stored[g.stored as usize + upto - 1].get());
         }
         let (w, b) = ((cpv - cell.start) / 64, (cpv - cell.start) % 64);
         (g.bits != NONE && self.bits[(g.bits + w) as usize] >> b & 1 == 1).then_some(g.whole)
@@ -363,7 +407,7 @@ impl Pairs {
         }
         node_groups.push(at[2]);
         let mut explicit = vec![0u32; t.explicit as usize];
-        let mut stored = vec![Cost::default(); t.partial as usize];
+        let mut stored = vec![Cost32::default(); t.partial as usize];
         let mut bits: Vec<u64> = Vec::new();
         // The last is one past the last group: the arrays' ends.
         let mut recs = vec![Rec::default(); t.cells as usize + 1];
@@ -372,7 +416,7 @@ impl Pairs {
             stored: at[1],
             bits: NONE,
             kd: 0,
-            whole: Cost::default(),
+            whole: Cost32::default(),
         };
         let mut cells = vec![IdRange::default(); pv.kd.len()];
         let mut regions = vec![Aabb::EMPTY; pv.kd.len()];
@@ -403,7 +447,7 @@ impl Pairs {
                         let (_, c, cost) = out.explicit[e];
                         explicit[f[0] as usize] = c;
                         if let Some(cost) = cost {
-                            let same = |a: Cost| {
+                            let same = |a: Cost32| {
                                 (a.cpu.to_bits(), a.gpu.to_bits())
                                     == (cost.cpu.to_bits(), cost.gpu.to_bits())
                             };
@@ -469,7 +513,7 @@ struct CellGroup {
     len: u32,
     /// Where its CPV set below cut nodes starts in the cell's `bits`.
     bits: Option<u32>,
-    whole: Cost,
+    whole: Cost32,
 }
 
 /// The pairs of one cell, before they are put into place.
@@ -481,7 +525,7 @@ struct CellPairs {
     groups: Vec<CellGroup>,
     /// The explicit pairs: (cluster, CPV id, cost when stored), by cluster
     /// and CPV.
-    explicit: Vec<(u32, u32, Option<Cost>)>,
+    explicit: Vec<(u32, u32, Option<Cost32>)>,
 }
 
 impl CellPairs {
@@ -494,17 +538,17 @@ impl CellPairs {
             &crate::views::Counters::new(),
         );
         let listable = Listable::new(ctx, &costs, &first.region);
-        let mut explicit: Vec<(u32, u32, Option<Cost>)> = Vec::new();
+        let mut explicit: Vec<(u32, u32, Option<Cost32>)> = Vec::new();
         let mut cuts: Vec<CpvCut> = Vec::with_capacity(r.len() as usize);
         for (i, c) in pv.cpvs[r.indices()].iter().enumerate() {
             let cut = cpv_cut(ctx, &costs, &listable, &c.region, &c.vdi);
             debug_assert_eq!((cut.cost, cut.listed(&listable)), (c.cost, c.listed));
             let ci = r.start + i as u32;
-            explicit.extend(
-                cut.explicit
-                    .iter()
-                    .map(|&(n, cost)| (n, ci, (cost != costs.nodes[n as usize]).then_some(cost))),
-            );
+            explicit.extend(cut.explicit.iter().map(|&(n, cost)| {
+                let whole = Cost32::down(costs.nodes[n as usize]);
+                let cost = Cost32::down(cost).min(whole);
+                (n, ci, (cost != whole).then_some(cost))
+            }));
             cuts.push(cut);
         }
         // Stable: each cluster's pairs stay in CPV order.
@@ -545,7 +589,7 @@ impl CellPairs {
                 node,
                 len: n,
                 bits: group_bits,
-                whole: costs.nodes[node as usize],
+                whole: Cost32::down(costs.nodes[node as usize]),
             });
         }
         CellPairs {
@@ -566,7 +610,8 @@ mod tests {
     use crate::views::{self, Counters, cpv_clusters};
 
     /// Every CPV's cluster list (spelled out by [`cpv_clusters`]) comes
-    /// back from the pairs with the same costs, bit for bit, whether
+    /// back from the pairs with the same costs as held ([`Cost32`]), bit
+    /// for bit, whether
     /// stored, explicit or below a cut node; clusters a CPV does not list
     /// have no pair; the iterator and `for_each` agree; and the cut stands
     /// for a share of the pairs (small on this small city, 89 % of them on
@@ -606,10 +651,12 @@ mod tests {
             let (_, list) = cpv_clusters(&ctx, &costs, &c.region, &c.vdi);
             let mut next = 0;
             for n in 0..h.nodes.len() as u32 {
+                // As held: rounded down, at most the whole cost.
                 let want = match list.get(next) {
                     Some(&(m, cost)) if m == n => {
                         next += 1;
-                        Some(cost)
+                        let whole = Cost32::down(costs.nodes[n as usize]);
+                        Some(Cost32::down(cost).min(whole).get())
                     }
                     _ => None,
                 };
