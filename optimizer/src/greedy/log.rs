@@ -8,20 +8,41 @@ use crate::math::gaps;
 /// (ascending), as gaps in LEB128 bytes ([`gaps`]). CPVs that gain from an accept lie
 /// in a few cells, whose CPVs are numbered together, so most gaps take one
 /// byte: a fraction of the four bytes (and the room for growth) per entry
-/// that per-CPV lists take.
+/// that per-CPV lists take. The bytes are held in chunks of a few
+/// megabytes, filled one after the other: a vector that doubles would
+/// hold up to twice the bytes (the log reaches half a gigabyte on the
+/// scale-4 city).
 #[derive(Clone, Debug, Default)]
 pub(super) struct AcceptLog {
-    /// Per accept: its candidate and the end of its CPVs in `bytes`.
-    accepts: Vec<(u32, u64)>,
-    bytes: Vec<u8>,
+    /// Per accept: its candidate, its chunk and the end of its CPVs there
+    /// (they start where the accept before it in the chunk ended).
+    accepts: Vec<(u32, u32, u32)>,
+    chunks: Vec<Vec<u8>>,
+    /// One accept's bytes before they go into a chunk.
+    scratch: Vec<u8>,
 }
+
+/// The least size of a chunk of [`AcceptLog`]'s bytes.
+const CHUNK_BYTES: usize = 4 << 20;
 
 impl AcceptLog {
     /// Records that candidate `cand` was accepted and made `cpvs`
     /// (ascending) faster.
     pub(super) fn push(&mut self, cand: u32, cpvs: impl IntoIterator<Item = u32>) {
-        gaps::push(&mut self.bytes, cpvs);
-        self.accepts.push((cand, self.bytes.len() as u64));
+        self.scratch.clear();
+        gaps::push(&mut self.scratch, cpvs);
+        let n = self.scratch.len();
+        if self
+            .chunks
+            .last()
+            .is_none_or(|c| c.capacity() - c.len() < n)
+        {
+            self.chunks.push(Vec::with_capacity(CHUNK_BYTES.max(n)));
+        }
+        let at = self.chunks.len() - 1;
+        let chunk = &mut self.chunks[at];
+        chunk.extend_from_slice(&self.scratch);
+        self.accepts.push((cand, at as u32, chunk.len() as u32));
     }
 
     /// Per CPV (of `cpvs`), the candidates accepted in it, in accept order,
@@ -35,10 +56,13 @@ impl AcceptLog {
         let mut lists: Vec<Vec<u32>> = vec![Vec::new(); cpvs];
         let mut seen = vec![u32::MAX; lineage.up.len()];
         let mut stamp = 0u32;
-        let mut start = 0usize;
-        for &(cand, end) in &self.accepts {
+        let (mut start, mut chunk) = (0usize, 0u32);
+        for &(cand, at, end) in &self.accepts {
+            if at != chunk {
+                (start, chunk) = (0, at);
+            }
             let end = end as usize;
-            for c in gaps::read(&self.bytes[start..end]) {
+            for c in gaps::read(&self.chunks[at as usize][start..end]) {
                 let list = &mut lists[c as usize];
                 if list.len() == list.capacity() && !list.is_empty() {
                     stamp = stamp.wrapping_add(1);
@@ -88,6 +112,35 @@ mod tests {
         assert_eq!(lists, expect);
         // Gaps 0, 127, 1, 16,255, 1, 2,080,768, 902,848 and 5, 122,
         // 2,999,873: a byte per seven bits.
-        assert_eq!(log.bytes.len(), 1 + 1 + 1 + 2 + 1 + 3 + 3 + 1 + 1 + 4);
+        let bytes: usize = log.chunks.iter().map(Vec::len).sum();
+        assert_eq!(bytes, 1 + 1 + 1 + 2 + 1 + 3 + 3 + 1 + 1 + 4);
+    }
+
+    /// Accepts whose bytes fill more than one chunk read back as written,
+    /// none split between chunks.
+    #[test]
+    fn accepts_across_chunks_read_back_what_was_pushed() {
+        let lineage = Lineage {
+            up: vec![u32::MAX; 8],
+            node: (0..8).collect(),
+        };
+        let cpvs = 2_000_000u32;
+        let mut log = AcceptLog::default();
+        // Every third CPV from a shifting start: 0.67 MB an accept, six to
+        // a chunk (the first gap of the last five takes two bytes).
+        let ids = |k: u32| (k..cpvs).step_by(3);
+        for k in 0..8u32 {
+            log.push(k, ids(k * 40));
+        }
+        assert_eq!(log.chunks.len(), 2);
+        assert!(log.chunks.iter().all(|c| c.capacity() == CHUNK_BYTES));
+        let lists = log.lists(cpvs as usize, &lineage);
+        let mut expect: Vec<Vec<u32>> = vec![Vec::new(); cpvs as usize];
+        for k in 0..8u32 {
+            for c in ids(k * 40) {
+                expect[c as usize].push(k);
+            }
+        }
+        assert_eq!(lists, expect);
     }
 }
