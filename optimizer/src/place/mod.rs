@@ -274,8 +274,14 @@ impl Prepared<'_> {
                 0,
             );
             st.end("placement");
-            let stats =
-                self.run_stats(ctx, counters, pv, &placement, std::mem::take(&mut st.times));
+            let stats = self.run_stats(
+                ctx,
+                counters,
+                pv,
+                &placement,
+                std::mem::take(&mut st.times),
+                Stats::default(),
+            );
             return Ok((placement, stats));
         }
 
@@ -284,7 +290,7 @@ impl Prepared<'_> {
             0.1,
             &format!("generating candidates for {} CPVs", pv.cpvs.len()),
         );
-        let cands = candidates::generate(ctx, job, pv);
+        let mut cands = candidates::generate(ctx, job, pv);
         st.end("candidates");
         ctl.check()?;
 
@@ -358,11 +364,7 @@ impl Prepared<'_> {
             ctl.check()?;
         }
 
-        st.begin("placement", 0.97, "writing the placement");
-        let placement = build_placement(ctx, job, pv, &cands, &sel);
-        st.end("placement");
-
-        let stats = Stats {
+        let counts = Stats {
             candidate_pairs: cands.pairs.len(),
             explicit_pairs: cands.pairs.explicit_len(),
             stored_pair_costs: cands.pairs.stored_len(),
@@ -377,13 +379,24 @@ impl Prepared<'_> {
             pruned: sel.pruned,
             partial_dropped: sel.partial_dropped,
             exact,
-            ..self.run_stats(ctx, counters, pv, &placement, std::mem::take(&mut st.times))
+            ..Stats::default()
         };
+        // The placement needs the candidates alone: the pairs and served
+        // lists, most of what the run holds, go before it is written, so
+        // they and its CPVs' lists are never held at once.
+        drop(std::mem::take(&mut cands.pairs));
+        drop(std::mem::take(&mut cands.served));
+        st.begin("placement", 0.97, "writing the placement");
+        let placement = build_placement(ctx, job, pv, &cands, &sel);
+        st.end("placement");
+        let times = std::mem::take(&mut st.times);
+        let stats = self.run_stats(ctx, counters, pv, &placement, times, counts);
         Ok((placement, stats))
     }
 
-    /// The counters every method reports (candidate and greedy counters
-    /// zero; the precision is measured beside the placement).
+    /// The counters every method reports, the others (candidate and
+    /// greedy counters) from `rest` (the precision is measured beside the
+    /// placement).
     fn run_stats(
         &self,
         ctx: &Context,
@@ -391,6 +404,7 @@ impl Prepared<'_> {
         pv: &ProblemViews,
         placement: &Placement,
         seconds: Vec<StageTime>,
+        rest: Stats,
     ) -> Stats {
         Stats {
             threads: rayon::current_num_threads(),
@@ -409,7 +423,7 @@ impl Prepared<'_> {
             peak_rss_bytes: peak_rss_bytes(),
             visibility: ctx.visibility.map(crate::visibility::Visibility::stats),
             lod: counters.lod_stats(ctx.scene, self.input().lod.clone()),
-            ..Stats::default()
+            ..rest
         }
     }
 }
@@ -471,13 +485,13 @@ pub const BYTES_PER_BIT_WORD: u64 = 8;
 pub const GREEDY_BYTES_PER_PAIR: u64 = 3;
 
 /// Bytes per pair whose cost is stored (its cluster is partly outside the
-/// CPV's enclosing set).
-pub const BYTES_PER_STORED: u64 = 16;
+/// CPV's enclosing set): two `f32` times.
+pub const BYTES_PER_STORED: u64 = 8;
 
 /// Bytes a run holds per group (one cluster's pairs in one cell), besides
-/// its served-list entries: the group itself (32 bytes), what the greedy's
-/// exact scorings found in it (8 bytes) and the allocator's slack.
-pub const BYTES_PER_GROUP: u64 = 48;
+/// its served-list entries: the group itself (24 bytes), what the greedy's
+/// exact scorings found in it (4 bytes) and the allocator's slack.
+pub const BYTES_PER_GROUP: u64 = 36;
 
 /// Bytes per entry of the candidates' served lists besides the entry
 /// itself (2 bytes, 4 where a cluster has more than 65,536 groups; see
