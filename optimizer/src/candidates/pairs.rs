@@ -353,8 +353,9 @@ impl Pairs {
         (m | e, e)
     }
 
-    /// The cost of cluster `node`'s objects in CPV `cpv`'s enclosing set,
-    /// if the CPV lists the cluster.
+    /// The cost of cluster `node`'s objects in CPV `cpv`'s enclosing set
+    /// as held (each time rounded down to an `f32`), if the CPV lists the
+    /// cluster.
     pub fn cost_of(&self, node: u32, cpv: u32) -> Option<Cost> {
         let gs = self.groups_of(node);
         let recs = &self.recs[gs.indices()];
