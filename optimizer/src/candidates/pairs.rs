@@ -18,8 +18,8 @@ use glam::DVec3;
 use rayon::prelude::*;
 use std::collections::HashMap;
 
-use crate::math::IdRange;
 use crate::math::geom::Aabb;
+use crate::math::{IdRange, f32_down};
 use crate::model::cost::Cost;
 use crate::views::{
     CellCuts, Context, CpvCut, Listable, PairCounts, ProblemViews, RegionCosts, cpv_cut,
@@ -33,6 +33,8 @@ const STORED: u32 = 1 << 31;
 const REPEAT: u32 = 1 << 30;
 /// The CPV id of an explicit pair.
 const ID: u32 = REPEAT - 1;
+/// No CPV (the first CPV of a group with no pairs).
+const NONE: u32 = u32::MAX;
 
 /// A pair's cost as held: each time rounded down to an `f32` (half the
 /// memory of a [`Cost`]; a relative step below 6e-8). A cost that is too
@@ -45,12 +47,6 @@ const ID: u32 = REPEAT - 1;
 struct Cost32 {
     cpu: f32,
     gpu: f32,
-}
-
-/// The greatest `f32` not above `x` (0 or more).
-fn f32_down(x: f64) -> f32 {
-    let f = x as f32;
-    if f64::from(f) > x { f.next_down() } else { f }
 }
 
 impl Cost32 {
@@ -77,8 +73,6 @@ impl Cost32 {
         }
     }
 }
-/// No CPV (the first CPV of a group with no pairs).
-const NONE: u32 = u32::MAX;
 
 /// One cell's CPVs that list one cluster, as [`Pairs::group`] gives it.
 #[derive(Clone, Copy, Debug)]

@@ -428,7 +428,8 @@ mod tests {
             a.idx.set(k, v);
         }
         a.compact();
-        assert_eq!((a.sizes().0, a.sizes().1), (n, 1));
+        let (held, values, _) = a.sizes();
+        assert_eq!((held, values), (n, 1));
         assert!(matches!(a.idx, Indices::Narrow(_)));
         assert_eq!(a.get(n - 1).cpu, 1.5);
     }

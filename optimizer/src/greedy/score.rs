@@ -6,14 +6,8 @@ use std::ops::Range;
 
 use super::State;
 use crate::candidates::Group;
-use crate::math::IdRange;
+use crate::math::{IdRange, f32_up};
 use crate::model::cost::Cost;
-
-/// The least `f32` not below `x` (finite `x`).
-fn f32_up(x: f64) -> f32 {
-    let f = x as f32;
-    if f64::from(f) < x { f.next_up() } else { f }
-}
 
 /// A time of 0 or more, rounded up to a 16-bit float with `f32`'s exponent
 /// (bfloat16: the upper half of the `f32`'s bits, a step up where the
@@ -44,8 +38,8 @@ impl Up16 {
 /// What an exact scoring found in one group (one cluster in one cell),
 /// over the CPVs still open to the cluster there (above `t_max`, cluster
 /// not covered), as times rounded up ([`Up16`]: held for each of the 66 M
-/// groups of the scale-4 city; infinity: not walked yet). Both only fall as the greedy goes on: a representation only
-/// loses the savings of impostors placed below, an excess only falls, and
+/// groups of the scale-4 city; infinity: not walked yet). Both only fall
+/// as the greedy goes on: a representation only loses the savings of impostors placed below, an excess only falls, and
 /// a CPV once solved or covered stays so. So a figure found at any time
 /// still bounds what any impostor of the cluster gains in the group.
 #[derive(Clone, Copy, Debug)]

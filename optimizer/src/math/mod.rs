@@ -42,3 +42,30 @@ impl IdRange {
         self.start as usize..self.end as usize
     }
 }
+
+/// The least `f32` not below `x`: a bound held in half an `f64`'s memory.
+pub fn f32_up(x: f64) -> f32 {
+    let f = x as f32;
+    if f64::from(f) < x { f.next_up() } else { f }
+}
+
+/// The greatest `f32` not above `x`.
+pub fn f32_down(x: f64) -> f32 {
+    let f = x as f32;
+    if f64::from(f) > x { f.next_down() } else { f }
+}
+
+#[cfg(test)]
+mod rounding_tests {
+    use super::{f32_down, f32_up};
+
+    /// Each rounds the way it says, to a neighbouring `f32`.
+    #[test]
+    fn f32_rounding_goes_the_way_it_says() {
+        for x in [0.1, 1.0 / 3.0, 2.5, 1e-7, 12_345.678_9, 3.0e38] {
+            let (d, u) = (f32_down(x), f32_up(x));
+            assert!(f64::from(d) <= x && x <= f64::from(u), "{x}");
+            assert!(d == u || d.next_up() == u, "{x}");
+        }
+    }
+}
