@@ -22,14 +22,19 @@ pub(super) struct NodeMarks {
 /// (a value is never changed in place: a new sum is a new value), so the
 /// CPVs of a cell that gained the same impostors hold one value between
 /// them: measured 9 times fewer values than adjusted CPVs on a quarter of
-/// the fly-over. Values no CPV refers to any more are dropped once they
-/// outnumber the rest.
+/// the fly-over. Each value counts the CPVs that refer to it; one no CPV
+/// refers to any more is free, and the next new value takes its place, so
+/// the values are never searched for the dead ones among the indices
+/// (which outnumber them eleven to one on the scale-4 city) unless most
+/// are free.
 #[derive(Clone, Debug, Default)]
 pub(super) struct Adjustments {
     idx: Indices,
     values: Vec<Cost>,
-    /// Values kept by the last compaction.
-    kept: usize,
+    /// Per value: how many CPVs refer to it (0: free).
+    refs: Vec<u32>,
+    /// The free values.
+    free: Vec<u32>,
 }
 
 /// No value yet (a CPV not adjusted before).
@@ -45,7 +50,10 @@ impl Adjustments {
     /// The value `sum(old value)` for a saving with bits `bits`: the one
     /// made last (`made`) when it had the same old value and saving (the
     /// changes of one call come in CPV order, so a cell's CPVs that gain
-    /// alike follow each other), else a new one.
+    /// alike follow each other), else a new one, in a free place if there
+    /// is one. The caller refers to it ([`refer`](Self::refer)). (A place
+    /// freed in a call may hold a new value in the same call: `made` names
+    /// an old value only while a CPV still to come refers to it.)
     #[inline]
     fn value_of(
         &mut self,
@@ -64,33 +72,66 @@ impl Adjustments {
         } else {
             sum(self.values[old as usize])
         };
-        if self.values.len() == self.values.capacity() {
-            // A quarter more, not twice: the values are the greedy's
-            // largest part on large maps (1.4 GB on the scale-4 city).
-            self.values.reserve_exact(self.values.len() / 4 + 16);
-        }
-        self.values.push(v);
-        let i = (self.values.len() - 1) as u32;
+        let i = match self.free.pop() {
+            Some(i) => {
+                self.values[i as usize] = v;
+                i
+            }
+            None => {
+                if self.values.len() == self.values.capacity() {
+                    // A quarter more, not twice: the values are among the
+                    // greedy's largest parts on large maps.
+                    let more = self.values.len() / 4 + 16;
+                    self.values.reserve_exact(more);
+                    self.refs.reserve_exact(more);
+                }
+                self.values.push(v);
+                self.refs.push(0);
+                (self.values.len() - 1) as u32
+            }
+        };
         *made = Some(((old, bits), i));
         i
     }
 
-    /// Drops the values no CPV refers to once the values have grown by a
-    /// quarter since the last time (amortised: each value is moved a
-    /// bounded number of times), and holds no more room than the values
-    /// kept.
+    /// One more CPV refers to value `v`.
+    #[inline]
+    fn refer(&mut self, v: u32) {
+        self.refs[v as usize] += 1;
+    }
+
+    /// The adjustment at rank `k` becomes value `v`; its old value is
+    /// freed when no other CPV refers to it.
+    #[inline]
+    fn replace(&mut self, k: usize, v: u32) {
+        self.refer(v);
+        let old = self.idx.get(k);
+        self.idx.set(k, v);
+        let r = &mut self.refs[old as usize];
+        *r -= 1;
+        if *r == 0 {
+            self.free.push(old);
+        }
+    }
+
+    /// Once most values are free, renumbers the others in the order the
+    /// indices first name them and drops the free ones (amortised: at
+    /// least as many values were freed since as are kept), narrowing wide
+    /// indices where every kept value fits in two bytes.
     fn compact(&mut self) {
-        if self.values.len() <= self.kept + self.kept / 4 + 64 {
+        if self.free.len() <= self.values.len() / 2 + 32 {
             return;
         }
         let mut map = vec![NO_VALUE; self.values.len()];
-        let mut kept = Vec::new();
-        let values = &self.values;
+        let live = self.values.len() - self.free.len();
+        let (mut kept, mut refs) = (Vec::with_capacity(live), Vec::with_capacity(live));
+        let (values, counts) = (&self.values, &self.refs);
         let mut renumber = |i: u32| {
             let m = &mut map[i as usize];
             if *m == NO_VALUE {
                 *m = kept.len() as u32;
                 kept.push(values[i as usize]);
+                refs.push(counts[i as usize]);
             }
             *m
         };
@@ -108,16 +149,33 @@ impl Adjustments {
         {
             self.idx = Indices::Narrow(v.iter().map(|&i| i as u16).collect());
         }
-        self.kept = kept.len();
-        kept.shrink_to_fit();
         self.values = kept;
+        self.refs = refs;
+        self.free = Vec::new();
     }
 
-    /// Adjustments held (adjusted CPVs), distinct values kept and the
-    /// room for them.
+    /// Adjustments held (adjusted CPVs), values in use and the places
+    /// for values (free or not), after checking that each value counts
+    /// the CPVs that refer to it and the free ones are those none does.
     #[cfg(test)]
     pub(super) fn sizes(&self) -> (usize, usize, usize) {
-        (self.idx.len(), self.values.len(), self.values.capacity())
+        let mut refs = vec![0u32; self.values.len()];
+        for k in 0..self.idx.len() {
+            refs[self.idx.get(k) as usize] += 1;
+        }
+        assert_eq!(refs, self.refs, "reference counts");
+        let mut free: Vec<u32> = (0..refs.len() as u32)
+            .filter(|&i| refs[i as usize] == 0)
+            .collect();
+        let mut held_free = self.free.clone();
+        held_free.sort_unstable();
+        free.sort_unstable();
+        assert_eq!(held_free, free, "free values");
+        (
+            self.idx.len(),
+            self.values.len() - self.free.len(),
+            self.values.len(),
+        )
     }
 }
 
@@ -329,12 +387,11 @@ fn adjust_row(row: &mut [u64], changes: &[(u32, Cost)], adjustments: &mut Adjust
         if row[3 * (c as usize / 64) + 1] >> (c % 64) & 1 == 1 {
             let old = adjustments.idx.get(k);
             let v = adjustments.value_of(&mut made, old, bits, |v| v + saving);
-            adjustments.idx.set(k, v);
+            adjustments.replace(k, v);
         } else {
-            new.push((
-                k,
-                adjustments.value_of(&mut made, NO_VALUE, bits, |_| saving),
-            ));
+            let v = adjustments.value_of(&mut made, NO_VALUE, bits, |_| saving);
+            adjustments.refer(v);
+            new.push((k, v));
         }
     }
     if !new.is_empty() {
@@ -397,6 +454,27 @@ mod tests {
         );
     }
 
+    /// A value no CPV refers to any more holds the next new one: the
+    /// places for values do not grow while the values in use do not.
+    #[test]
+    fn a_freed_value_holds_the_next() {
+        let mut a = Adjustments::default();
+        let c = |x: f64| Cost { cpu: x, gpu: 0.0 };
+        let v0 = a.value_of(&mut None, NO_VALUE, [1, 0], |_| c(1.0));
+        a.refer(v0);
+        a.idx.insert_sorted(&[(0, v0)]);
+        for round in 0..100u64 {
+            let old = a.idx.get(0);
+            let v = a.value_of(&mut None, old, [round + 2, 0], |x| x + c(1.0));
+            a.replace(0, v);
+            a.compact();
+            let (held, values, places) = a.sizes();
+            assert_eq!((held, values), (1, 1));
+            assert!(places <= 2, "{places} places");
+        }
+        assert_eq!(a.get(0).cpu, 101.0);
+    }
+
     /// A cluster with more than 65,536 distinct adjustments keeps each
     /// (the indices widen) and compacts back to two bytes once most are
     /// dropped.
@@ -413,7 +491,9 @@ mod tests {
                 };
                 let bits = [c.cpu.to_bits(), 0];
                 // Inserted into none held: every position is 0.
-                (0, a.value_of(&mut made, NO_VALUE, bits, |_| c))
+                let v = a.value_of(&mut made, NO_VALUE, bits, |_| c);
+                a.refer(v);
+                (0, v)
             })
             .collect();
         a.idx.insert_sorted(&new);
@@ -425,11 +505,11 @@ mod tests {
         let same = Cost { cpu: 1.5, gpu: 0.0 };
         let v = a.value_of(&mut None, NO_VALUE, [1, 1], |_| same);
         for k in 0..n {
-            a.idx.set(k, v);
+            a.replace(k, v);
         }
         a.compact();
-        let (held, values, _) = a.sizes();
-        assert_eq!((held, values), (n, 1));
+        let (held, values, places) = a.sizes();
+        assert_eq!((held, values, places), (n, 1, 1));
         assert!(matches!(a.idx, Indices::Narrow(_)));
         assert_eq!(a.get(n - 1).cpu, 1.5);
     }
