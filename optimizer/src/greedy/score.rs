@@ -39,9 +39,10 @@ impl Up16 {
 /// over the CPVs still open to the cluster there (above `t_max`, cluster
 /// not covered), as times rounded up ([`Up16`]: held for each of the 66 M
 /// groups of the scale-4 city; infinity: not walked yet). Both only fall
-/// as the greedy goes on: a representation only loses the savings of impostors placed below, an excess only falls, and
-/// a CPV once solved or covered stays so. So a figure found at any time
-/// still bounds what any impostor of the cluster gains in the group.
+/// as the greedy goes on: a representation only loses the savings of
+/// impostors placed below, an excess only falls, and a CPV once solved or
+/// covered stays so. So a figure found at any time still bounds what any
+/// impostor of the cluster gains in the group.
 #[derive(Clone, Copy, Debug)]
 pub(super) struct Walked {
     /// The costliest representation of the cluster in an open CPV: no
