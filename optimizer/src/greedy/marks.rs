@@ -3,270 +3,68 @@
 use crate::math::IdRange;
 use crate::model::cost::Cost;
 
-/// Two bits per (CPV, hierarchy node), covered and adjusted (see
-/// [`State`]), stored by node, with a rank directory over the adjusted
-/// bits: an adjusted (CPV, cluster)'s adjustment sits at its rank in the
-/// cluster's [`Adjustments`]. Per node and 64 CPVs, three adjacent words
-/// (covered, adjusted, adjusted bits before them in the node's row).
-/// Scoring walks one cluster's pairs, whose CPVs are contiguous ids within
-/// a cell, so consecutive lookups share cache lines, in the marks and in
-/// the adjustments: 3/8 byte per (CPV, node).
+/// Per (CPV, hierarchy node) two bits, covered and adjusted (see
+/// [`State`]), and a third where an adjusted (CPV, cluster) starts a run:
+/// the adjusted CPVs of a cluster, in CPV order, fall into runs of equal
+/// adjustments (the CPVs of a cell that gained the same impostors), each
+/// run's value held once in the cluster's [`Adjustments`]. Stored by node;
+/// per node and 64 CPVs, four adjacent words: covered, adjusted, run
+/// starts, and the runs started before them in the node's row (a rank
+/// directory: an adjusted CPV's value is at the number of run starts up to
+/// it, less one). Scoring walks one cluster's pairs, whose CPVs are
+/// contiguous ids within a cell, so consecutive lookups share cache lines,
+/// in the marks and in the values: half a byte per (CPV, node).
 pub(super) struct NodeMarks {
     /// Words per node.
     pub(super) row: usize,
     pub(super) bits: Vec<u64>,
 }
 
-/// One cluster's adjustments: per CPV where it is adjusted (by rank), the
-/// index of its value. Sums that come out equal bit for bit share a value
-/// (a value is never changed in place: a new sum is a new value), so the
-/// CPVs of a cell that gained the same impostors hold one value between
-/// them: measured 9 times fewer values than adjusted CPVs on a quarter of
-/// the fly-over. Each value counts the CPVs that refer to it; one no CPV
-/// refers to any more is free, and the next new value takes its place, so
-/// the values are never searched for the dead ones among the indices
-/// (which outnumber them eleven to one on the scale-4 city) unless most
-/// are free.
+/// Words per 64 CPVs in a node's row of [`NodeMarks`]: covered, adjusted,
+/// run starts, runs before.
+pub(super) const WORDS: usize = 4;
+
+/// One cluster's adjustments: the value of each run of its adjusted CPVs
+/// ([`NodeMarks`]), in CPV order. Neighbouring runs differ bit for bit (a
+/// change that makes them equal merges them): on the scale-4 city about ten
+/// adjusted CPVs share a run, so a run's value in place of an index per
+/// CPV into shared values holds less than half the bytes.
 #[derive(Clone, Debug, Default)]
 pub(super) struct Adjustments {
-    idx: Indices,
     values: Vec<Cost>,
-    /// Per value: how many CPVs refer to it (0: free).
-    refs: Vec<u32>,
-    /// The free values.
-    free: Vec<u32>,
 }
-
-/// No value yet (a CPV not adjusted before).
-const NO_VALUE: u32 = u32::MAX;
 
 impl Adjustments {
-    /// The adjustment at rank `k`.
+    /// The value of run `k`.
     #[inline]
     pub(super) fn get(&self, k: usize) -> Cost {
-        self.values[self.idx.get(k) as usize]
+        self.values[k]
     }
 
-    /// The value `sum(old value)` for a saving with bits `bits`: the one
-    /// made last (`made`) when it had the same old value and saving (the
-    /// changes of one call come in CPV order, so a cell's CPVs that gain
-    /// alike follow each other), else a new one, in a free place if there
-    /// is one. The caller refers to it ([`refer`](Self::refer)). (A place
-    /// freed in a call may hold a new value in the same call: `made` names
-    /// an old value only while a CPV still to come refers to it.)
-    #[inline]
-    fn value_of(
-        &mut self,
-        made: &mut Option<((u32, [u64; 2]), u32)>,
-        old: u32,
-        bits: [u64; 2],
-        sum: impl FnOnce(Cost) -> Cost,
-    ) -> u32 {
-        if let Some((key, v)) = *made
-            && key == (old, bits)
-        {
-            return v;
-        }
-        let v = if old == NO_VALUE {
-            sum(Cost::default())
-        } else {
-            sum(self.values[old as usize])
-        };
-        let i = match self.free.pop() {
-            Some(i) => {
-                self.values[i as usize] = v;
-                i
-            }
-            None => {
-                if self.values.len() == self.values.capacity() {
-                    // A quarter more, not twice: the values are among the
-                    // greedy's largest parts on large maps.
-                    let more = self.values.len() / 4 + 16;
-                    self.values.reserve_exact(more);
-                    self.refs.reserve_exact(more);
-                }
-                self.values.push(v);
-                self.refs.push(0);
-                (self.values.len() - 1) as u32
-            }
-        };
-        *made = Some(((old, bits), i));
-        i
-    }
-
-    /// One more CPV refers to value `v`.
-    #[inline]
-    fn refer(&mut self, v: u32) {
-        self.refs[v as usize] += 1;
-    }
-
-    /// The adjustment at rank `k` becomes value `v`; its old value is
-    /// freed when no other CPV refers to it.
-    #[inline]
-    fn replace(&mut self, k: usize, v: u32) {
-        self.refer(v);
-        let old = self.idx.get(k);
-        self.idx.set(k, v);
-        let r = &mut self.refs[old as usize];
-        *r -= 1;
-        if *r == 0 {
-            self.free.push(old);
-        }
-    }
-
-    /// Once most values are free, renumbers the others in the order the
-    /// indices first name them and drops the free ones (amortised: at
-    /// least as many values were freed since as are kept), narrowing wide
-    /// indices where every kept value fits in two bytes.
-    fn compact(&mut self) {
-        if self.free.len() <= self.values.len() / 2 + 32 {
-            return;
-        }
-        let mut map = vec![NO_VALUE; self.values.len()];
-        let live = self.values.len() - self.free.len();
-        let (mut kept, mut refs) = (Vec::with_capacity(live), Vec::with_capacity(live));
-        let (values, counts) = (&self.values, &self.refs);
-        let mut renumber = |i: u32| {
-            let m = &mut map[i as usize];
-            if *m == NO_VALUE {
-                *m = kept.len() as u32;
-                kept.push(values[i as usize]);
-                refs.push(counts[i as usize]);
-            }
-            *m
-        };
-        // In place, at the indices' own width: narrow indices keep
-        // fitting (no more values are kept than they referred to); wide
-        // ones narrow where every kept value fits.
-        match &mut self.idx {
-            Indices::Narrow(v) => v
-                .iter_mut()
-                .for_each(|x| *x = renumber(u32::from(*x)) as u16),
-            Indices::Wide(v) => v.iter_mut().for_each(|x| *x = renumber(*x)),
-        }
-        if let Indices::Wide(v) = &self.idx
-            && kept.len() <= 1 << 16
-        {
-            self.idx = Indices::Narrow(v.iter().map(|&i| i as u16).collect());
-        }
-        self.values = kept;
-        self.refs = refs;
-        self.free = Vec::new();
-    }
-
-    /// Adjustments held (adjusted CPVs), values in use and the places
-    /// for values (free or not), after checking that each value counts
-    /// the CPVs that refer to it and the free ones are those none does.
+    /// The runs held.
     #[cfg(test)]
-    pub(super) fn sizes(&self) -> (usize, usize, usize) {
-        let mut refs = vec![0u32; self.values.len()];
-        for k in 0..self.idx.len() {
-            refs[self.idx.get(k) as usize] += 1;
+    pub(super) fn len(&self) -> usize {
+        self.values.len()
+    }
+
+    /// Replaces the values of runs `range` by `new`, growing the room by
+    /// an eighth at least when it must grow (the values are the largest
+    /// thing the greedy adds as it goes: doubling would leave up to half
+    /// of it unused).
+    fn splice(&mut self, range: std::ops::Range<usize>, new: Vec<Cost>) {
+        let len = self.values.len() - range.len() + new.len();
+        if len > self.values.capacity() {
+            let more = (len - self.values.len()).max(self.values.len() / 8);
+            self.values.reserve_exact(more);
         }
-        assert_eq!(refs, self.refs, "reference counts");
-        let mut free: Vec<u32> = (0..refs.len() as u32)
-            .filter(|&i| refs[i as usize] == 0)
-            .collect();
-        let mut held_free = self.free.clone();
-        held_free.sort_unstable();
-        free.sort_unstable();
-        assert_eq!(held_free, free, "free values");
-        (
-            self.idx.len(),
-            self.values.len() - self.free.len(),
-            self.values.len(),
-        )
+        self.values.splice(range, new);
     }
 }
 
-/// The value indices of a cluster's adjustments, two bytes each while the
-/// cluster has no more than 65,536 values (nearly all do: a cell's CPVs
-/// share values), four once it has more: the adjustments are the largest
-/// thing the greedy adds as it goes.
-#[derive(Clone, Debug)]
-enum Indices {
-    Narrow(Vec<u16>),
-    Wide(Vec<u32>),
-}
-
-impl Default for Indices {
-    fn default() -> Self {
-        Indices::Narrow(Vec::new())
-    }
-}
-
-#[cfg(test)]
-impl From<Vec<u32>> for Indices {
-    /// Narrow when every index fits in two bytes.
-    fn from(v: Vec<u32>) -> Self {
-        if v.iter().all(|&i| i <= u32::from(u16::MAX)) {
-            Indices::Narrow(v.into_iter().map(|i| i as u16).collect())
-        } else {
-            Indices::Wide(v)
-        }
-    }
-}
-
-impl Indices {
-    #[inline]
-    fn get(&self, k: usize) -> u32 {
-        match self {
-            Indices::Narrow(v) => u32::from(v[k]),
-            Indices::Wide(v) => v[k],
-        }
-    }
-
-    #[cfg(test)]
-    fn len(&self) -> usize {
-        match self {
-            Indices::Narrow(v) => v.len(),
-            Indices::Wide(v) => v.len(),
-        }
-    }
-
-    /// Sets index `k` to `i`, widening every index first where `i` does
-    /// not fit in two bytes.
-    #[inline]
-    fn set(&mut self, k: usize, i: u32) {
-        if i > u32::from(u16::MAX) {
-            self.widen();
-        }
-        match self {
-            Indices::Narrow(v) => v[k] = i as u16,
-            Indices::Wide(v) => v[k] = i,
-        }
-    }
-
-    fn widen(&mut self) {
-        if let Indices::Narrow(v) = self {
-            *self = Indices::Wide(v.iter().map(|&i| u32::from(i)).collect());
-        }
-    }
-
-    /// Inserts each `(k, i)` of `new` (ascending `k`, positions among the
-    /// indices held) before the index at `k`.
-    fn insert_sorted(&mut self, new: &[(usize, u32)]) {
-        if new.iter().any(|&(_, i)| i > u32::from(u16::MAX)) {
-            self.widen();
-        }
-        fn merged<T: Copy>(old: &[T], new: impl Iterator<Item = (usize, T)>) -> Vec<T> {
-            let mut out = Vec::with_capacity(old.len() + new.size_hint().0);
-            let mut from = 0;
-            for (k, v) in new {
-                out.extend_from_slice(&old[from..k]);
-                out.push(v);
-                from = k;
-            }
-            out.extend_from_slice(&old[from..]);
-            out
-        }
-        match self {
-            Indices::Narrow(v) => {
-                *v = merged(v, new.iter().map(|&(k, i)| (k, i as u16)));
-            }
-            Indices::Wide(v) => *v = merged(v, new.iter().copied()),
-        }
-    }
+/// Two adjustments that are one value: equal bit for bit.
+#[inline]
+fn same(a: Cost, b: Cost) -> bool {
+    a.cpu.to_bits() == b.cpu.to_bits() && a.gpu.to_bits() == b.gpu.to_bits()
 }
 
 /// What [`NodeMarks`] says of a (CPV, cluster).
@@ -275,19 +73,19 @@ pub(super) enum Mark {
     /// Neither covered nor adjusted: represented by its objects.
     Plain,
     Covered,
-    /// Adjusted, with the rank of its adjustment.
+    /// Adjusted, with the run of its adjustment.
     Adjusted(usize),
 }
 
 /// Bytes of the greedy's marks for `cpvs` CPVs over a hierarchy of `nodes`
 /// nodes (part of the memory `place` predicts).
 pub fn marks_bytes(cpvs: usize, nodes: usize) -> u64 {
-    (nodes * 3 * cpvs.div_ceil(64) * 8) as u64
+    (nodes * WORDS * cpvs.div_ceil(64) * 8) as u64
 }
 
 impl NodeMarks {
     pub(super) fn new(cpvs: usize, nodes: usize) -> Self {
-        let row = 3 * cpvs.div_ceil(64);
+        let row = WORDS * cpvs.div_ceil(64);
         NodeMarks {
             row,
             bits: vec![0; nodes * row],
@@ -295,14 +93,15 @@ impl NodeMarks {
     }
 
     pub(super) fn get(&self, c: u32, n: u32) -> Mark {
-        let at = n as usize * self.row + 3 * (c as usize / 64);
+        let at = n as usize * self.row + WORDS * (c as usize / 64);
         let b = c % 64;
         let (cov, adj) = (self.bits[at], self.bits[at + 1]);
         if cov >> b & 1 == 1 {
             Mark::Covered
         } else if adj >> b & 1 == 1 {
-            let below = adj & ((1u64 << b) - 1);
-            Mark::Adjusted(self.bits[at + 2] as usize + below.count_ones() as usize)
+            // A run starts at or before any adjusted CPV of the row.
+            let upto = self.bits[at + 2] & (u64::MAX >> (63 - b));
+            Mark::Adjusted(self.bits[at + 3] as usize + upto.count_ones() as usize - 1)
         } else {
             Mark::Plain
         }
@@ -346,7 +145,7 @@ impl NodeMarks {
         use rayon::prelude::*;
         let mut masks: Vec<(usize, u64)> = Vec::new();
         for c in cpvs {
-            let (word, bit) = (3 * (c as usize / 64), c % 64);
+            let (word, bit) = (WORDS * (c as usize / 64), c % 64);
             match masks.last_mut() {
                 Some((w, m)) if *w == word => *m |= 1 << bit,
                 _ => masks.push((word, 1 << bit)),
@@ -366,46 +165,148 @@ impl NodeMarks {
                 }
             });
     }
+
+    /// Checks node `n`'s runs against its adjustments: every run starts at
+    /// an adjusted CPV, one starts at the row's first, the directory counts
+    /// the starts before each word, there is a value per run and
+    /// neighbouring runs differ. Returns the adjusted CPVs and the runs.
+    #[cfg(test)]
+    pub(super) fn check_runs(&self, n: u32, adj: &Adjustments) -> (usize, usize) {
+        let row = &self.bits[n as usize * self.row..][..self.row];
+        let (mut adjusted, mut runs) = (0usize, 0usize);
+        for w in row.chunks_exact(WORDS) {
+            assert_eq!(w[2] & !w[1], 0, "a run starts at a CPV not adjusted");
+            assert_eq!(w[3] as usize, runs, "directory");
+            if adjusted == 0 && w[1] != 0 {
+                assert_eq!(
+                    w[1] & w[1].wrapping_neg() & w[2],
+                    w[1] & w[1].wrapping_neg()
+                );
+            }
+            adjusted += w[1].count_ones() as usize;
+            runs += w[2].count_ones() as usize;
+        }
+        assert_eq!(runs, adj.len(), "a value per run");
+        for k in 1..runs {
+            assert!(
+                !same(adj.get(k - 1), adj.get(k)),
+                "runs {k} and before equal"
+            );
+        }
+        (adjusted, runs)
+    }
 }
 
-/// [`NodeMarks::adjust_all`] on one node's row.
+/// [`NodeMarks::adjust_all`] on one node's row. The runs of each word with
+/// a change are made again (each adjusted CPV there keeps its value or
+/// gains its saving; a new run starts wherever the value differs from the
+/// one before); between such words and after the last, only the first
+/// adjusted CPV can change: it starts a run unless the run before goes on
+/// with it (equal values). The values of the runs from the first changed
+/// word to the last are replaced, and the directory is counted again from
+/// the first changed word.
 fn adjust_row(row: &mut [u64], changes: &[(u32, Cost)], adjustments: &mut Adjustments) {
-    let rank = |row: &[u64], c: u32| {
-        let at = 3 * (c as usize / 64);
-        let below = row[at + 1] & ((1u64 << (c % 64)) - 1);
-        row[at + 2] as usize + below.count_ones() as usize
+    let (Some(first), Some(last)) = (changes.first(), changes.last()) else {
+        return;
     };
-    // Existing adjustments first, while the ranks are unchanged; the
-    // new ones with the rank they get among the old ones. Equal sums
-    // (the same saving added to the same value, as in the CPVs of a
-    // cell that held the cluster whole) share one value.
-    let mut made: Option<((u32, [u64; 2]), u32)> = None;
-    let mut new: Vec<(usize, u32)> = Vec::new();
-    for &(c, saving) in changes {
-        let k = rank(row, c);
-        let bits = [saving.cpu.to_bits(), saving.gpu.to_bits()];
-        if row[3 * (c as usize / 64) + 1] >> (c % 64) & 1 == 1 {
-            let old = adjustments.idx.get(k);
-            let v = adjustments.value_of(&mut made, old, bits, |v| v + saving);
-            adjustments.replace(k, v);
-        } else {
-            let v = adjustments.value_of(&mut made, NO_VALUE, bits, |_| saving);
-            adjustments.refer(v);
-            new.push((k, v));
+    let (w0, w1) = (first.0 as usize / 64, last.0 as usize / 64);
+    let words = row.len() / WORDS;
+    let values = &adjustments.values;
+    // Runs started before word `w` (the old directory: it is counted again
+    // only at the end).
+    let dir = |row: &[u64], w: usize| row[WORDS * w + 3] as usize;
+    // The values of runs `base..end` are made again; the run before them
+    // may go on.
+    let base = dir(row, w0);
+    let mut end = dir(row, w1) + row[WORDS * w1 + 2].count_ones() as usize;
+    let mut prev = base.checked_sub(1).map(|r| values[r]);
+    // The old run of the CPV at hand (`usize::MAX`: none yet).
+    let mut run = base.wrapping_sub(1);
+    let mut made: Vec<Cost> = Vec::new();
+    // The first adjusted CPV of word `x` (the first of its stretch of
+    // words without changes): its value (its own run's, or the run going
+    // on) starts a run unless the last one goes on with it. Returns
+    // whether it started a run before.
+    let boundary =
+        |row: &mut [u64], x: usize, run: usize, prev: &mut Option<Cost>, made: &mut Vec<Cost>| {
+            let at = WORDS * x;
+            let bit = row[at + 1] & row[at + 1].wrapping_neg();
+            let started = row[at + 2] & bit != 0;
+            let v = if started {
+                values[dir(row, x)]
+            } else {
+                values[run]
+            };
+            if prev.is_some_and(|p| same(p, v)) {
+                row[at + 2] &= !bit;
+            } else {
+                row[at + 2] |= bit;
+                made.push(v);
+                *prev = Some(v);
+            }
+            started
+        };
+    let (mut next, mut w) = (0usize, w0);
+    while next < changes.len() {
+        let cw = changes[next].0 as usize / 64;
+        if let Some(x) = (w..cw).find(|&x| row[WORDS * x + 1] != 0) {
+            // Words `w..cw` hold no change: past the first adjusted CPV,
+            // their runs stay as they were.
+            let started = boundary(row, x, run, &mut prev, &mut made);
+            let (from, to) = (dir(row, x) + usize::from(started), dir(row, cw));
+            if to > from {
+                made.extend_from_slice(&values[from..to]);
+                prev = Some(values[to - 1]);
+            }
+            run = if to > from || started { to - 1 } else { run };
+        }
+        let at = WORDS * cw;
+        let (adjusted, starts) = (row[at + 1], row[at + 2]);
+        let lo = (64 * cw) as u32;
+        let n = changes[next..].partition_point(|&(c, _)| c < lo + 64);
+        let mine = &changes[next..next + n];
+        next += n;
+        let all = mine.iter().fold(adjusted, |m, &(c, _)| m | 1 << (c - lo));
+        let (mut m, mut new_starts, mut k) = (all, 0u64, 0usize);
+        while m != 0 {
+            let b = m.trailing_zeros();
+            m &= m - 1;
+            let bit = 1u64 << b;
+            if starts & bit != 0 {
+                run = run.wrapping_add(1);
+            }
+            let changed = mine.get(k).filter(|&&(c, _)| c == lo + b);
+            let v = match (adjusted & bit != 0, changed) {
+                (true, Some(&(_, saving))) => values[run] + saving,
+                (false, Some(&(_, saving))) => saving,
+                (true, None) => values[run],
+                (false, None) => unreachable!("a CPV of the word is adjusted or changed"),
+            };
+            k += usize::from(changed.is_some());
+            if prev.is_none_or(|p| !same(p, v)) {
+                new_starts |= bit;
+                made.push(v);
+                prev = Some(v);
+            }
+        }
+        row[at + 1] = all;
+        row[at + 2] = new_starts;
+        w = cw + 1;
+    }
+    // After the last changed word, up to the first adjusted CPV: the
+    // runs after it stay, but its own is made again.
+    if let Some(x) = (w1 + 1..words).find(|&x| row[WORDS * x + 1] != 0) {
+        let started = boundary(row, x, run, &mut prev, &mut made);
+        if started {
+            end += 1;
         }
     }
-    if !new.is_empty() {
-        for &(c, _) in changes {
-            row[3 * (c as usize / 64) + 1] |= 1 << (c % 64);
-        }
-        adjustments.idx.insert_sorted(&new);
-        let mut before = 0u64;
-        for w in row.chunks_exact_mut(3) {
-            w[2] = before;
-            before += u64::from(w[1].count_ones());
-        }
+    adjustments.splice(base..end, made);
+    let mut before = base as u64;
+    for w in row[WORDS * w0..].chunks_exact_mut(WORDS) {
+        w[3] = before;
+        before += u64::from(w[2].count_ones());
     }
-    adjustments.compact();
 }
 
 /// The bits of word `w` of a CPV bitset that belong to the CPV range `r`.
@@ -426,91 +327,98 @@ pub(super) fn cell_word_mask(r: IdRange, w: usize) -> u64 {
 mod tests {
     use super::*;
 
-    /// Indices read back what was set and inserted, across the widening
-    /// the first index above two bytes makes, and narrow again when
-    /// renumbered within two bytes.
-    #[test]
-    fn indices_keep_their_values_across_widths() {
-        let mut idx = Indices::from(vec![5, 7, 65_535]);
-        assert!(matches!(idx, Indices::Narrow(_)));
-        let mut want = vec![5u32, 7, 65_535];
-        idx.insert_sorted(&[(0, 1), (2, 9)]);
-        want.insert(0, 1);
-        want.insert(3, 9);
-        assert!(matches!(idx, Indices::Narrow(_)));
-        idx.set(1, 65_536);
-        want[1] = 65_536;
-        assert!(matches!(idx, Indices::Wide(_)));
-        idx.insert_sorted(&[(5, 70_000)]);
-        want.push(70_000);
-        assert_eq!((0..idx.len()).map(|k| idx.get(k)).collect::<Vec<_>>(), want);
-        let narrow = Indices::from(vec![0, 65_535]);
-        assert!(matches!(narrow, Indices::Narrow(_)));
-        let mut n2 = narrow.clone();
-        n2.insert_sorted(&[(1, 100_000)]);
-        assert_eq!(
-            (0..3).map(|k| n2.get(k)).collect::<Vec<_>>(),
-            [0, 100_000, 65_535]
-        );
+    /// The adjustment of CPV `c` in node 0, if adjusted.
+    fn value(marks: &NodeMarks, adj: &Adjustments, c: u32) -> Option<f64> {
+        match marks.get(c, 0) {
+            Mark::Adjusted(k) => Some(adj.get(k).cpu),
+            _ => None,
+        }
     }
 
-    /// A value no CPV refers to any more holds the next new one: the
-    /// places for values do not grow while the values in use do not.
+    /// CPVs that gain alike share one run, across CPVs not adjusted and
+    /// across words; a change inside a run splits it in three, and the
+    /// change that makes the values equal again merges them back.
     #[test]
-    fn a_freed_value_holds_the_next() {
-        let mut a = Adjustments::default();
+    fn runs_split_and_merge() {
+        let mut marks = NodeMarks::new(300, 1);
+        let mut adj = vec![Adjustments::default()];
         let c = |x: f64| Cost { cpu: x, gpu: 0.0 };
-        let v0 = a.value_of(&mut None, NO_VALUE, [1, 0], |_| c(1.0));
-        a.refer(v0);
-        a.idx.insert_sorted(&[(0, v0)]);
-        for round in 0..100u64 {
-            let old = a.idx.get(0);
-            let v = a.value_of(&mut None, old, [round + 2, 0], |x| x + c(1.0));
-            a.replace(0, v);
-            a.compact();
-            let (held, values, places) = a.sizes();
-            assert_eq!((held, values), (1, 1));
-            assert!(places <= 2, "{places} places");
-        }
-        assert_eq!(a.get(0).cpu, 101.0);
-    }
+        let alike = |cpvs: std::ops::Range<u32>, x: f64| -> Vec<(u32, Cost)> {
+            cpvs.map(|k| (k, c(x))).collect()
+        };
+        marks.adjust_all(&[0], &alike(10..150, 1.0), &mut adj);
+        assert_eq!(marks.check_runs(0, &adj[0]), (140, 1));
+        // New CPVs after a gap, with the same value: still one run.
+        marks.adjust_all(&[0], &alike(200..210, 1.0), &mut adj);
+        assert_eq!(marks.check_runs(0, &adj[0]), (150, 1));
+        marks.adjust_all(&[0], &[(70, c(1.0))], &mut adj);
+        assert_eq!(marks.check_runs(0, &adj[0]), (150, 3));
+        assert_eq!(value(&marks, &adj[0], 70), Some(2.0));
+        assert_eq!(value(&marks, &adj[0], 71), Some(1.0));
+        assert_eq!(value(&marks, &adj[0], 205), Some(1.0));
+        assert_eq!(value(&marks, &adj[0], 160), None);
+        // A run starting in an earlier word: the change in word 1 splits
+        // the run that began in word 0 and goes on into word 3.
+        marks.adjust_all(&[0], &[(64, c(3.0)), (130, c(-1.0))], &mut adj);
+        assert_eq!(marks.check_runs(0, &adj[0]), (150, 7));
+        assert_eq!(value(&marks, &adj[0], 64), Some(4.0));
+        assert_eq!(value(&marks, &adj[0], 130), Some(0.0));
+        assert_eq!(value(&marks, &adj[0], 131), Some(1.0));
+        // Back to equal: merged into one run again.
+        marks.adjust_all(
+            &[0],
+            &[(64, c(-3.0)), (70, c(-1.0)), (130, c(1.0))],
+            &mut adj,
+        );
+        assert_eq!(marks.check_runs(0, &adj[0]), (150, 1));
+        // A change at the very first adjusted CPV, one before it and one
+        // at the end of the word.
+        marks.adjust_all(&[0], &[(3, c(1.0)), (10, c(0.5)), (63, c(2.0))], &mut adj);
+        assert_eq!(marks.check_runs(0, &adj[0]), (151, 5));
+        assert_eq!(value(&marks, &adj[0], 63), Some(3.0));
+        assert_eq!(value(&marks, &adj[0], 3), Some(1.0));
+        assert_eq!(value(&marks, &adj[0], 10), Some(1.5));
+        assert_eq!(value(&marks, &adj[0], 11), Some(1.0));
+        // The run going on into the next word keeps its value there.
+        assert_eq!(value(&marks, &adj[0], 64), Some(1.0));
+        assert_eq!(value(&marks, &adj[0], 299), None);
 
-    /// A cluster with more than 65,536 distinct adjustments keeps each
-    /// (the indices widen) and compacts back to two bytes once most are
-    /// dropped.
-    #[test]
-    fn adjustments_past_two_bytes_of_values() {
-        let n = 70_000usize;
-        let mut a = Adjustments::default();
-        let mut made = None;
-        let new: Vec<(usize, u32)> = (0..n)
-            .map(|k| {
-                let c = Cost {
-                    cpu: k as f64,
-                    gpu: 0.0,
-                };
-                let bits = [c.cpu.to_bits(), 0];
-                // Inserted into none held: every position is 0.
-                let v = a.value_of(&mut made, NO_VALUE, bits, |_| c);
-                a.refer(v);
-                (0, v)
-            })
-            .collect();
-        a.idx.insert_sorted(&new);
-        assert!(matches!(a.idx, Indices::Wide(_)));
-        for k in [0, 1, 65_535, 65_536, n - 1] {
-            assert_eq!(a.get(k).cpu, k as f64);
+        // The first adjusted CPV after the changed words starts a run of
+        // the value the changes end with: the two runs become one.
+        let mut marks = NodeMarks::new(300, 1);
+        let mut adj = vec![Adjustments::default()];
+        marks.adjust_all(&[0], &alike(10..150, 1.0), &mut adj);
+        marks.adjust_all(&[0], &[(128, c(1.0))], &mut adj);
+        assert_eq!(marks.check_runs(0, &adj[0]), (140, 3));
+        marks.adjust_all(&[0], &alike(64..128, 1.0), &mut adj);
+        assert_eq!(marks.check_runs(0, &adj[0]), (140, 3));
+        assert_eq!(value(&marks, &adj[0], 128), Some(2.0));
+        assert_eq!(value(&marks, &adj[0], 129), Some(1.0));
+
+        // Words without changes between changed ones keep their runs; the
+        // first adjusted CPV of such a stretch joins the run before it
+        // when their values are equal.
+        let mut marks = NodeMarks::new(300, 1);
+        let mut adj = vec![Adjustments::default()];
+        marks.adjust_all(&[0], &alike(0..256, 1.0), &mut adj);
+        marks.adjust_all(&[0], &[(10, c(1.0)), (200, c(1.0))], &mut adj);
+        assert_eq!(marks.check_runs(0, &adj[0]), (256, 5));
+        assert_eq!(value(&marks, &adj[0], 150), Some(1.0));
+        marks.adjust_all(&[0], &[(64, c(1.0))], &mut adj);
+        assert_eq!(marks.check_runs(0, &adj[0]), (256, 7));
+        marks.adjust_all(&[0], &[(63, c(1.0)), (130, c(5.0))], &mut adj);
+        assert_eq!(marks.check_runs(0, &adj[0]), (256, 9));
+        let want = [
+            (62, 1.0),
+            (63, 2.0),
+            (64, 2.0),
+            (65, 1.0),
+            (130, 6.0),
+            (131, 1.0),
+            (200, 2.0),
+        ];
+        for (k, x) in want {
+            assert_eq!(value(&marks, &adj[0], k), Some(x), "CPV {k}");
         }
-        // Every CPV given the same new value: the old ones are dropped.
-        let same = Cost { cpu: 1.5, gpu: 0.0 };
-        let v = a.value_of(&mut None, NO_VALUE, [1, 1], |_| same);
-        for k in 0..n {
-            a.replace(k, v);
-        }
-        a.compact();
-        let (held, values, places) = a.sizes();
-        assert_eq!((held, values, places), (n, 1, 1));
-        assert!(matches!(a.idx, Indices::Narrow(_)));
-        assert_eq!(a.get(n - 1).cpu, 1.5);
     }
 }

@@ -50,7 +50,7 @@ pub(crate) use lazy::select_lazy_with;
 pub use lazy::{LAZY_BATCH, select_lazy, select_lazy_giving_up};
 use log::AcceptLog;
 pub use marks::marks_bytes;
-use marks::{Adjustments, Mark, NodeMarks, cell_word_mask};
+use marks::{Adjustments, Mark, NodeMarks, WORDS, cell_word_mask};
 pub use partial::{drop_partial, reselect_solvable};
 use score::Walked;
 
@@ -225,8 +225,9 @@ struct State<'a> {
     pv: &'a ProblemViews,
     cands: &'a [Candidate],
     all: &'a Candidates,
-    /// Per cluster: for the CPVs where it is adjusted, in CPV order, what
-    /// the impostors placed below it there save against its objects.
+    /// Per cluster: for the runs of CPVs where it is adjusted, in CPV
+    /// order, what the impostors placed below it there save against its
+    /// objects (see [`NodeMarks`]).
     adjustments: Vec<Adjustments>,
     /// Per (CPV, cluster): covered when an impostor of the cluster or an
     /// ancestor is placed there (a subtree is a range of pre-order ids),
@@ -395,7 +396,7 @@ impl<'a> State<'a> {
         let row = &self.marks.bits[node as usize * self.marks.row..][..self.marks.row];
         let (first, last) = (r.start as usize / 64, (r.end as usize - 1) / 64);
         (first..=last)
-            .map(|w| (self.unsolved[w] & cell_word_mask(r, w) & !row[3 * w]).count_ones())
+            .map(|w| (self.unsolved[w] & cell_word_mask(r, w) & !row[WORDS * w]).count_ones())
             .sum()
     }
 
@@ -408,7 +409,7 @@ impl<'a> State<'a> {
         let r = self.cell_cpvs[kd as usize];
         let row = &self.marks.bits[node as usize * self.marks.row..][..self.marks.row];
         let (first, last) = (r.start as usize / 64, (r.end as usize - 1) / 64);
-        (first..=last).any(|w| self.unsolved[w] & cell_word_mask(r, w) & !row[3 * w] != 0)
+        (first..=last).any(|w| self.unsolved[w] & cell_word_mask(r, w) & !row[WORDS * w] != 0)
     }
 
     /// The sum of the positive excess of cell `kd`'s CPVs.
@@ -458,7 +459,7 @@ impl<'a> State<'a> {
         match self.marks.get(c, node) {
             Mark::Covered => None,
             Mark::Plain => Some(orig),
-            Mark::Adjusted(rank) => Some(orig - self.adjustments[node as usize].get(rank)),
+            Mark::Adjusted(run) => Some(orig - self.adjustments[node as usize].get(run)),
         }
     }
 
@@ -748,8 +749,8 @@ mod tests {
         assert!((0..200).all(|c| marks.get(c, 0) == Mark::Plain && marks.get(c, 8) == Mark::Plain));
     }
 
-    /// The node-major marks with their batched rank directory agree with
-    /// a plain map of (CPV, cluster) to adjustment.
+    /// The node-major marks with their runs of equal adjustments agree
+    /// with a plain map of (CPV, cluster) to adjustment.
     #[test]
     fn marks_and_adjustments_match_a_map() {
         use std::collections::BTreeMap;
@@ -793,23 +794,20 @@ mod tests {
                 covered.insert((c, n));
             }
         }
-        // Each value counts the CPVs that refer to it (checked by
-        // `sizes`); the free ones were taken again or dropped: at most as
-        // many places for values as twice those in use, which are no more
-        // than the CPVs held.
-        for a in &adjustments {
-            let (held, values, places) = a.sizes();
-            assert!(values <= held, "{values} values for {held}");
-            assert!(places <= 2 * values + 64, "{places} places for {values}");
+        // Each node's runs are well formed (checked by `check_runs`), no
+        // more than its adjusted CPVs.
+        for (n, a) in adjustments.iter().enumerate() {
+            let (adjusted, runs) = marks.check_runs(n as u32, a);
+            assert!(runs <= adjusted, "{runs} runs for {adjusted}");
         }
         for c in 0..cpvs as u32 {
             for n in 0..nodes as u32 {
                 match marks.get(c, n) {
                     Mark::Covered => assert!(covered.contains(&(c, n))),
                     Mark::Plain => assert!(!want.contains_key(&(c, n))),
-                    Mark::Adjusted(rank) => {
+                    Mark::Adjusted(run) => {
                         assert!(!covered.contains(&(c, n)));
-                        assert_eq!(adjustments[n as usize].get(rank).cpu, want[&(c, n)]);
+                        assert_eq!(adjustments[n as usize].get(run).cpu, want[&(c, n)]);
                     }
                 }
             }
