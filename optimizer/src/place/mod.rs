@@ -475,13 +475,14 @@ pub const BYTES_PER_PAIR: u64 = 4;
 pub const BYTES_PER_BIT_WORD: u64 = 8;
 
 /// Bytes the greedy adds per pair: the savings of descendant impostors per
-/// (ancestor, CPV) it adjusts (an index of 2 or 4 bytes each, into values
-/// the CPVs of a cell share), its marks' growth and the log of what each
-/// accept changed (the CPVs' impostor lists are made from it once that
-/// state is dropped). From the end of candidate generation to the greedy's
-/// peak, measured: 2.2 bytes a pair on the scale-4 city, 2.1 at scale 2, on
-/// the fly-over and on its 500 m part, 1.2 on the track; the candidates'
-/// terms are counted at their peak, so the sum stays above the peak.
+/// (ancestor, CPV) it adjusts (a value per run of CPVs with equal savings),
+/// its marks' growth and the log of what each accept changed (the CPVs'
+/// impostor lists are made from it once that state is dropped). From the
+/// end of candidate generation to the greedy's peak, measured: 1.5 bytes a
+/// pair on the scale-4 city, 1.0 at scale 1 (with an index per adjusted
+/// CPV instead of runs: 2.2 at scale 4, 2.1 at scale 2, on the fly-over and
+/// on its 500 m part, 1.2 on the track); the candidates' terms are counted
+/// at their peak, so the sum stays above the peak.
 pub const GREEDY_BYTES_PER_PAIR: u64 = 3;
 
 /// Bytes per pair whose cost is stored (its cluster is partly outside the
