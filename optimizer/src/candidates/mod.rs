@@ -261,255 +261,279 @@ pub fn generate(ctx: &Context, job: &Job, pv: &ProblemViews) -> Candidates {
         return Candidates::default();
     }
 
+    // The distinct corners of the cells' regions (all CPVs of a cell share
+    // its region), found once for every cluster, and per kd node its
+    // cell's eight.
+    let cells = pv.cells();
+    let (points, cell_corners) =
+        distinct_corners(cells.iter().map(|r| pv.cpvs[r.start as usize].region));
+    let mut corners_of_kd = vec![[0u32; 8]; pv.kd.len()];
+    for (r, ids) in cells.iter().zip(cell_corners) {
+        corners_of_kd[pv.cpvs[r.start as usize].kd as usize] = ids;
+    }
+
     // Per cluster: the candidates and, for each, the local list of groups it
     // serves (as offsets from the cluster's first group).
     let per_node: Vec<(Vec<Candidate>, Vec<u32>)> = (0..h.nodes.len() as u32)
         .into_par_iter()
-        .map(|n| {
-            let IdRange { start: g0, end: g1 } = pairs.groups_of(n);
-            if g0 == g1 || ctx.cancelled() {
-                return (Vec::new(), Vec::new());
-            }
-            let sphere = h.nodes[n as usize].sphere;
-            // Directions of the cells' corners from the cluster, each
-            // distinct corner once (neighbouring cells share corners, which
-            // the grid computes bit for bit alike), and each group's eight.
-            let (corner_dirs, corner_ids) = distinct_corners(
-                (g0..g1).map(|g| pv.cpvs[pairs.first_cpv(&pairs.group(g)) as usize].region),
-                sphere.center,
-            );
-            let mut seen = vec![u32::MAX; corner_dirs.len()];
-            let mut block_no = 0u32;
-            let size = 2.0 * sphere.radius;
-            // (key, group) for every cell inside the key's view cell,
-            // packed ([`pack`]).
-            let mut packed: Vec<u128> = Vec::new();
-            let mut grid_specs: Vec<Option<Option<ImpostorSpec>>> =
-                vec![None; alphas.len() * (last_k as usize + 1)];
-            for g in g0..g1 {
-                let gr = &pairs.group(g);
-                let first = &pv.cpvs[pairs.first_cpv(gr) as usize];
-                let region = first.region;
-                let dist = pairs.dist(gr, sphere.center);
-                // Some CPV of the cell is accelerated by an impostor of `spec`.
-                let helps = |spec: &ImpostorSpec| {
-                    let imp = ctx.model.impostor(spec.layers, sphere.radius, dist);
-                    pairs.iter(gr).any(|(c, cost)| {
-                        let cur = pv.cpvs[c as usize].cost;
-                        ctx.model.frame_time(cur - cost + imp) < ctx.model.frame_time(cur)
-                    })
-                };
-                if shafts && size > 0.0 && dist >= size {
-                    let k = ladder_index(size, dist, steps, last_k);
-                    let d_k = ladder_distance(size, k, steps);
-                    let corners = corner_ids[(g - g0) as usize].map(|c| corner_dirs[c as usize]);
-                    let corners = &corners;
-                    let w = (region.center() - sphere.center).normalize();
-                    for (ai, &alpha) in alphas.iter().enumerate() {
-                        // The grid shaft's impostor, once per cluster, angle
-                        // and distance step.
-                        let slot = &mut grid_specs[ai * (last_k as usize + 1) + k as usize];
-                        let Some(spec) =
-                            *slot.get_or_insert_with(|| imodel.shaft(&sphere, alpha, d_k))
-                        else {
-                            continue;
-                        };
-                        if !helps(&spec) {
-                            continue;
-                        }
-                        let grid = &grids[ai];
-                        grid.holding(w, alpha, corners, |m, j| {
-                            let key = Key::Shaft {
-                                angle: ai as u8,
-                                axis: grid.index(m, j),
-                                k,
-                            };
-                            packed.push(pack(key, g));
-                        });
-                    }
+        .map_init(
+            || {
+                (
+                    vec![0u32; points.len()],
+                    vec![DVec3::ZERO; points.len()],
+                    vec![0u64; points.len()],
+                    0u64,
+                )
+            },
+            |(dir_of, dirs_at, seen, block_no), n| {
+                let IdRange { start: g0, end: g1 } = pairs.groups_of(n);
+                if g0 == g1 || ctx.cancelled() {
+                    return (Vec::new(), Vec::new());
                 }
-                if let Some(level) = per_cell {
-                    let mut kd = first.kd;
-                    for _ in 0..level {
-                        let up = pv.kd[kd as usize].parent;
-                        if up == u32::MAX {
-                            break;
+                let sphere = h.nodes[n as usize].sphere;
+                // The direction of corner `id` from the cluster, computed once
+                // per cluster (`dir_of[id]`: the cluster it was computed for,
+                // plus one).
+                let mut corner_dir = |id: u32| {
+                    let id = id as usize;
+                    if dir_of[id] != n + 1 {
+                        dir_of[id] = n + 1;
+                        dirs_at[id] = (points[id] - sphere.center).normalize();
+                    }
+                    dirs_at[id]
+                };
+                let size = 2.0 * sphere.radius;
+                // (key, group) for every cell inside the key's view cell,
+                // packed ([`pack`]).
+                let mut packed: Vec<u128> = Vec::new();
+                let mut grid_specs: Vec<Option<Option<ImpostorSpec>>> =
+                    vec![None; alphas.len() * (last_k as usize + 1)];
+                for g in g0..g1 {
+                    let gr = &pairs.group(g);
+                    let first = &pv.cpvs[pairs.first_cpv(gr) as usize];
+                    let region = first.region;
+                    let dist = pairs.dist(gr, sphere.center);
+                    // Some CPV of the cell is accelerated by an impostor of `spec`.
+                    let helps = |spec: &ImpostorSpec| {
+                        let imp = ctx.model.impostor(spec.layers, sphere.radius, dist);
+                        pairs.iter(gr).any(|(c, cost)| {
+                            let cur = pv.cpvs[c as usize].cost;
+                            ctx.model.frame_time(cur - cost + imp) < ctx.model.frame_time(cur)
+                        })
+                    };
+                    if shafts && size > 0.0 && dist >= size {
+                        let k = ladder_index(size, dist, steps, last_k);
+                        let d_k = ladder_distance(size, k, steps);
+                        let corners = corners_of_kd[gr.kd as usize].map(&mut corner_dir);
+                        let corners = &corners;
+                        let w = (region.center() - sphere.center).normalize();
+                        for (ai, &alpha) in alphas.iter().enumerate() {
+                            // The grid shaft's impostor, once per cluster, angle
+                            // and distance step.
+                            let slot = &mut grid_specs[ai * (last_k as usize + 1) + k as usize];
+                            let Some(spec) =
+                                *slot.get_or_insert_with(|| imodel.shaft(&sphere, alpha, d_k))
+                            else {
+                                continue;
+                            };
+                            if !helps(&spec) {
+                                continue;
+                            }
+                            let grid = &grids[ai];
+                            grid.holding(w, alpha, corners, |m, j| {
+                                let key = Key::Shaft {
+                                    angle: ai as u8,
+                                    axis: grid.index(m, j),
+                                    k,
+                                };
+                                packed.push(pack(key, g));
+                            });
                         }
-                        kd = up;
                     }
-                    if let Some(spec) = imodel.boxed(&sphere, &pv.kd[kd as usize].aabb)
-                        && helps(&spec)
-                    {
-                        packed.push(pack(Key::Box { kd }, g));
-                    }
-                } else if boxes {
-                    let mut kd = first.kd;
-                    while kd != u32::MAX {
-                        let node = &pv.kd[kd as usize];
-                        let Some(spec) = imodel.boxed(&sphere, &node.aabb) else {
-                            break;
-                        };
-                        if helps(&spec) {
+                    if let Some(level) = per_cell {
+                        let mut kd = first.kd;
+                        for _ in 0..level {
+                            let up = pv.kd[kd as usize].parent;
+                            if up == u32::MAX {
+                                break;
+                            }
+                            kd = up;
+                        }
+                        if let Some(spec) = imodel.boxed(&sphere, &pv.kd[kd as usize].aabb)
+                            && helps(&spec)
+                        {
                             packed.push(pack(Key::Box { kd }, g));
                         }
-                        kd = node.parent;
-                    }
-                }
-            }
-            // In block order (see [`pack`]).
-            packed.sort_unstable();
-            let tuples: Vec<(Key, u32)> = packed.into_iter().map(unpack).collect();
-            let mut cands: Vec<Candidate> = Vec::new();
-            let mut served: Vec<u32> = Vec::with_capacity(tuples.len());
-            let mut i = 0;
-            while i < tuples.len() {
-                // One block: same (angle, axis) for shafts, same kd for boxes.
-                let same_block = |a: &Key, b: &Key| match (a, b) {
-                    (
-                        Key::Shaft {
-                            angle: a1,
-                            axis: x1,
-                            ..
-                        },
-                        Key::Shaft {
-                            angle: a2,
-                            axis: x2,
-                            ..
-                        },
-                    ) => (a1, x1) == (a2, x2),
-                    _ => a == b,
-                };
-                let mut e = i;
-                while e < tuples.len() && same_block(&tuples[i].0, &tuples[e].0) {
-                    e += 1;
-                }
-                let start = served.len() as u32;
-                served.extend(tuples[i..e].iter().map(|t| t.1 - g0));
-                // The block's candidates: one per distinct key, serving the
-                // block's prefix up to the end of its key.
-                let mut ends: Vec<usize> = Vec::new();
-                for t in i + 1..=e {
-                    if t == e || tuples[t].0 != tuples[t - 1].0 {
-                        ends.push(t);
-                    }
-                }
-                // Shafts: the directions of the served cells' corners from
-                // the cluster in block order, each distinct corner where it
-                // first appears (so every prefix of cells has its corners in
-                // a prefix), and the smallest cone around each candidate's.
-                // `corner_end[t - i]`: the corners of the first `t - i` cells.
-                let (dirs, corner_end, fits) = match tuples[i].0 {
-                    Key::Shaft { .. } => {
-                        block_no += 1;
-                        let mut dirs: Vec<DVec3> = Vec::with_capacity(8 * (e - i));
-                        let mut corner_end = Vec::with_capacity(e - i + 1);
-                        corner_end.push(0);
-                        for &(_, g) in &tuples[i..e] {
-                            for id in corner_ids[(g - g0) as usize] {
-                                if seen[id as usize] != block_no {
-                                    seen[id as usize] = block_no;
-                                    dirs.push(corner_dirs[id as usize]);
-                                }
+                    } else if boxes {
+                        let mut kd = first.kd;
+                        while kd != u32::MAX {
+                            let node = &pv.kd[kd as usize];
+                            let Some(spec) = imodel.boxed(&sphere, &node.aabb) else {
+                                break;
+                            };
+                            if helps(&spec) {
+                                packed.push(pack(Key::Box { kd }, g));
                             }
-                            corner_end.push(dirs.len());
+                            kd = node.parent;
                         }
-                        let prefix_ends: Vec<usize> =
-                            ends.iter().map(|&t| corner_end[t - i]).collect();
-                        let fits = fit_cones(&mut dirs, &prefix_ends);
-                        (dirs, corner_end, fits)
                     }
-                    Key::Box { .. } => (Vec::new(), Vec::new(), Vec::new()),
-                };
-                // The last fitted axis and the smallest cosine of its prefix's
-                // corners to it: a prefix whose fit keeps the axis is measured
-                // on its new corners only.
-                let mut measured: Option<(DVec3, usize, f64)> = None;
-                let first_in_block = cands.len();
-                let mut nearest = f64::INFINITY;
-                let mut grid_widest = 0.0f64;
-                let mut s = i;
-                for (c, &t) in ends.iter().enumerate() {
-                    let served_end = start + (t - i) as u32;
-                    let cand = match tuples[s].0 {
-                        Key::Shaft { angle, axis, k } => {
-                            let alpha = alphas[angle as usize];
-                            let grid_axis = grids[angle as usize].axis_at(axis);
-                            // The shaft starts where its nearest served
-                            // cell does (never before `d_k`): the same
-                            // cells are served, at the resolution and layer
-                            // count their distance needs.
-                            for &(_, g) in &tuples[s..t] {
-                                nearest = nearest.min(pairs.dist(&pairs.group(g), sphere.center));
-                            }
-                            let d = ladder_distance(size, k, steps).max(nearest);
-                            // Likewise it narrows to the smallest cone
-                            // around the served cells' corners (convex, so
-                            // it contains the cells), measured exactly; the
-                            // grid axis stands in should the fit fail.
-                            let (from, to) = (corner_end[s - i], corner_end[t - i]);
-                            grid_widest =
-                                grid_widest.max(cone_half_angle(&dirs[from..to], grid_axis));
-                            let (axis, widest) = fits[c]
-                                .map(|a| {
-                                    let min_cos = match measured {
-                                        Some((b, len, m)) if b == a => {
-                                            min_cos(&dirs[len..to], a).min(m)
-                                        }
-                                        _ => min_cos(&dirs[..to], a),
-                                    };
-                                    measured = Some((a, to, min_cos));
-                                    (a, min_cos.clamp(-1.0, 1.0).acos())
-                                })
-                                .filter(|fit| fit.1 < grid_widest)
-                                .unwrap_or((grid_axis, grid_widest));
-                            let alpha = alpha.min(widest * (1.0 + 1e-9) + 1e-12);
-                            imodel.shaft(&sphere, alpha, d).map(|spec| Candidate {
-                                node: n,
-                                shaft: Shaft {
-                                    axis,
-                                    half_angle: alpha,
-                                    min_distance: d,
-                                },
-                                kd: u32::MAX,
-                                spec,
-                                served: IdRange::new(start, served_end),
-                            })
-                        }
-                        Key::Box { kd } => {
-                            let aabb: Aabb = pv.kd[kd as usize].aabb;
-                            imodel.boxed(&sphere, &aabb).map(|spec| Candidate {
-                                node: n,
-                                shaft: Shaft::default(),
-                                kd,
-                                spec,
-                                served: IdRange::new(start, served_end),
-                            })
-                        }
+                }
+                // In block order (see [`pack`]).
+                packed.sort_unstable();
+                let tuples: Vec<(Key, u32)> = packed.into_iter().map(unpack).collect();
+                let mut cands: Vec<Candidate> = Vec::new();
+                let mut served: Vec<u32> = Vec::with_capacity(tuples.len());
+                let mut i = 0;
+                while i < tuples.len() {
+                    // One block: same (angle, axis) for shafts, same kd for boxes.
+                    let same_block = |a: &Key, b: &Key| match (a, b) {
+                        (
+                            Key::Shaft {
+                                angle: a1,
+                                axis: x1,
+                                ..
+                            },
+                            Key::Shaft {
+                                angle: a2,
+                                axis: x2,
+                                ..
+                            },
+                        ) => (a1, x1) == (a2, x2),
+                        _ => a == b,
                     };
-                    if let Some(cand) = cand {
-                        // A shaft that serves a longer prefix of the block
-                        // with the same layers and no more memory is at
-                        // least as good in every problem view: it replaces
-                        // the previous one.
-                        let block_first = cands.len() > first_in_block;
-                        if let (true, Some(prev)) = (block_first, cands.last())
-                            && prev.kd == u32::MAX
-                            && prev.spec.layers == cand.spec.layers
-                            && prev.spec.memory_bytes >= cand.spec.memory_bytes
-                        {
-                            cands.pop();
-                        }
-                        cands.push(cand);
+                    let mut e = i;
+                    while e < tuples.len() && same_block(&tuples[i].0, &tuples[e].0) {
+                        e += 1;
                     }
-                    s = t;
+                    let start = served.len() as u32;
+                    served.extend(tuples[i..e].iter().map(|t| t.1 - g0));
+                    // The block's candidates: one per distinct key, serving the
+                    // block's prefix up to the end of its key.
+                    let mut ends: Vec<usize> = Vec::new();
+                    for t in i + 1..=e {
+                        if t == e || tuples[t].0 != tuples[t - 1].0 {
+                            ends.push(t);
+                        }
+                    }
+                    // Shafts: the directions of the served cells' corners from
+                    // the cluster in block order, each distinct corner where it
+                    // first appears (so every prefix of cells has its corners in
+                    // a prefix), and the smallest cone around each candidate's.
+                    // `corner_end[t - i]`: the corners of the first `t - i` cells.
+                    let (dirs, corner_end, fits) = match tuples[i].0 {
+                        Key::Shaft { .. } => {
+                            *block_no += 1;
+                            let mut dirs: Vec<DVec3> = Vec::with_capacity(8 * (e - i));
+                            let mut corner_end = Vec::with_capacity(e - i + 1);
+                            corner_end.push(0);
+                            for &(_, g) in &tuples[i..e] {
+                                for id in corners_of_kd[pairs.group(g).kd as usize] {
+                                    if seen[id as usize] != *block_no {
+                                        seen[id as usize] = *block_no;
+                                        dirs.push(corner_dir(id));
+                                    }
+                                }
+                                corner_end.push(dirs.len());
+                            }
+                            let prefix_ends: Vec<usize> =
+                                ends.iter().map(|&t| corner_end[t - i]).collect();
+                            let fits = fit_cones(&mut dirs, &prefix_ends);
+                            (dirs, corner_end, fits)
+                        }
+                        Key::Box { .. } => (Vec::new(), Vec::new(), Vec::new()),
+                    };
+                    // The last fitted axis and the smallest cosine of its prefix's
+                    // corners to it: a prefix whose fit keeps the axis is measured
+                    // on its new corners only.
+                    let mut measured: Option<(DVec3, usize, f64)> = None;
+                    let first_in_block = cands.len();
+                    let mut nearest = f64::INFINITY;
+                    let mut grid_widest = 0.0f64;
+                    let mut s = i;
+                    for (c, &t) in ends.iter().enumerate() {
+                        let served_end = start + (t - i) as u32;
+                        let cand = match tuples[s].0 {
+                            Key::Shaft { angle, axis, k } => {
+                                let alpha = alphas[angle as usize];
+                                let grid_axis = grids[angle as usize].axis_at(axis);
+                                // The shaft starts where its nearest served
+                                // cell does (never before `d_k`): the same
+                                // cells are served, at the resolution and layer
+                                // count their distance needs.
+                                for &(_, g) in &tuples[s..t] {
+                                    nearest =
+                                        nearest.min(pairs.dist(&pairs.group(g), sphere.center));
+                                }
+                                let d = ladder_distance(size, k, steps).max(nearest);
+                                // Likewise it narrows to the smallest cone
+                                // around the served cells' corners (convex, so
+                                // it contains the cells), measured exactly; the
+                                // grid axis stands in should the fit fail.
+                                let (from, to) = (corner_end[s - i], corner_end[t - i]);
+                                grid_widest =
+                                    grid_widest.max(cone_half_angle(&dirs[from..to], grid_axis));
+                                let (axis, widest) = fits[c]
+                                    .map(|a| {
+                                        let min_cos = match measured {
+                                            Some((b, len, m)) if b == a => {
+                                                min_cos(&dirs[len..to], a).min(m)
+                                            }
+                                            _ => min_cos(&dirs[..to], a),
+                                        };
+                                        measured = Some((a, to, min_cos));
+                                        (a, min_cos.clamp(-1.0, 1.0).acos())
+                                    })
+                                    .filter(|fit| fit.1 < grid_widest)
+                                    .unwrap_or((grid_axis, grid_widest));
+                                let alpha = alpha.min(widest * (1.0 + 1e-9) + 1e-12);
+                                imodel.shaft(&sphere, alpha, d).map(|spec| Candidate {
+                                    node: n,
+                                    shaft: Shaft {
+                                        axis,
+                                        half_angle: alpha,
+                                        min_distance: d,
+                                    },
+                                    kd: u32::MAX,
+                                    spec,
+                                    served: IdRange::new(start, served_end),
+                                })
+                            }
+                            Key::Box { kd } => {
+                                let aabb: Aabb = pv.kd[kd as usize].aabb;
+                                imodel.boxed(&sphere, &aabb).map(|spec| Candidate {
+                                    node: n,
+                                    shaft: Shaft::default(),
+                                    kd,
+                                    spec,
+                                    served: IdRange::new(start, served_end),
+                                })
+                            }
+                        };
+                        if let Some(cand) = cand {
+                            // A shaft that serves a longer prefix of the block
+                            // with the same layers and no more memory is at
+                            // least as good in every problem view: it replaces
+                            // the previous one.
+                            let block_first = cands.len() > first_in_block;
+                            if let (true, Some(prev)) = (block_first, cands.last())
+                                && prev.kd == u32::MAX
+                                && prev.spec.layers == cand.spec.layers
+                                && prev.spec.memory_bytes >= cand.spec.memory_bytes
+                            {
+                                cands.pop();
+                            }
+                            cands.push(cand);
+                        }
+                        s = t;
+                    }
+                    i = e;
                 }
-                i = e;
-            }
-            // Each cluster's list is kept until all are joined: without
-            // the room its doubling left.
-            cands.shrink_to_fit();
-            (cands, served)
-        })
+                // Each cluster's list is kept until all are joined: without
+                // the room its doubling left.
+                cands.shrink_to_fit();
+                (cands, served)
+            },
+        )
         .collect();
     // Moved out cluster by cluster into vectors of their final size, so
     // the candidates are not held twice.

@@ -193,27 +193,26 @@ pub(super) fn min_cos(dirs: &[DVec3], axis: DVec3) -> f64 {
     dirs.iter().map(|w| w.dot(axis)).fold(1.0, f64::min)
 }
 
-/// The directions from `apex` to the distinct corners of `regions`, and
-/// each region's eight corners as indices into them. Corners are the same
-/// when their coordinates are, bit for bit.
-pub(super) fn distinct_corners(
-    regions: impl Iterator<Item = Aabb>,
-    apex: DVec3,
-) -> (Vec<DVec3>, Vec<[u32; 8]>) {
+/// The distinct corners of `regions`, and each region's eight corners as
+/// indices into them. Corners are the same when their coordinates are, bit
+/// for bit (neighbouring cells share corners, which the grid computes bit
+/// for bit alike).
+pub(super) fn distinct_corners(regions: impl Iterator<Item = Aabb>) -> (Vec<DVec3>, Vec<[u32; 8]>) {
     let corners: Vec<[DVec3; 8]> = regions.map(|r| r.corners()).collect();
     let bits = |p: DVec3| [p.x.to_bits(), p.y.to_bits(), p.z.to_bits()];
-    let mut order: Vec<u32> = (0..8 * corners.len() as u32).collect();
-    let at = |i: u32| corners[i as usize / 8][i as usize % 8];
-    order.sort_unstable_by_key(|&i| (bits(at(i)), i));
+    let mut order: Vec<([u64; 3], u32)> = (0..8 * corners.len() as u32)
+        .map(|i| (bits(corners[i as usize / 8][i as usize % 8]), i))
+        .collect();
+    order.sort_unstable();
     let mut ids = vec![[0u32; 8]; corners.len()];
-    let mut dirs: Vec<DVec3> = Vec::new();
-    for (n, &i) in order.iter().enumerate() {
-        if n == 0 || bits(at(order[n - 1])) != bits(at(i)) {
-            dirs.push((at(i) - apex).normalize());
+    let mut points: Vec<DVec3> = Vec::new();
+    for (n, &(b, i)) in order.iter().enumerate() {
+        if n == 0 || order[n - 1].0 != b {
+            points.push(corners[i as usize / 8][i as usize % 8]);
         }
-        ids[i as usize / 8][i as usize % 8] = dirs.len() as u32 - 1;
+        ids[i as usize / 8][i as usize % 8] = points.len() as u32 - 1;
     }
-    (dirs, ids)
+    (points, ids)
 }
 
 /// Axes of the smallest cones around prefixes of unit directions `dirs`:
@@ -343,14 +342,14 @@ mod tests {
             .flat_map(|x| (0..2).map(move |z| (x, z)))
             .map(|(x, z)| grid.cell_box([x, 0, z], [x + 1, 1, z + 1]))
             .collect();
-        let apex = DVec3::new(30.0, 100.0, -40.0);
-        let (dirs, ids) = distinct_corners(cells.iter().copied(), apex);
-        assert_eq!(dirs.len(), 24);
+        let (points, ids) = distinct_corners(cells.iter().copied());
+        assert_eq!(points.len(), 24);
         for (cell, ids) in cells.iter().zip(&ids) {
             for (p, &id) in cell.corners().iter().zip(ids) {
-                assert_eq!(dirs[id as usize], (*p - apex).normalize());
+                assert_eq!(points[id as usize], *p);
             }
         }
+        let dirs = &points;
         let mut used: Vec<u32> = ids.iter().flatten().copied().collect();
         used.sort_unstable();
         used.dedup();
